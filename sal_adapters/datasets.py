@@ -1,0 +1,167 @@
+"""Opening datasets by kind and writing sequences back in a dataset layout.
+
+A dataset kind is an object with ``name``, ``description``, ``open(path, **options)`` and
+``write(sequence, out_dir) -> path``; built-ins and plug-ins register in the ``sal.datasets``
+entry-point group.
+"""
+
+from __future__ import annotations
+
+import inspect
+import json
+import shutil
+import tempfile
+from abc import ABC, abstractmethod
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+from tqdm.auto import tqdm
+
+from sal_adapters.errors import DatasetError
+from sal_adapters.plugins import EntryPointRegistry
+from sal_adapters.sequence import Frame, Sequence
+
+__all__ = [
+    "DatasetKind",
+    "DATASETS",
+    "WRITTEN_MARKER",
+    "open_dataset",
+    "write_sequence",
+    "truncate",
+]
+
+#: File left in every folder ``write_sequence`` made: what was written and how to reopen it.
+WRITTEN_MARKER = "sal_sequence.json"
+
+
+class DatasetKind(ABC):
+    """A dataset layout: how to open it and how to write a sequence in it."""
+
+    name: str = ""
+    description: str = ""
+
+    @abstractmethod
+    def open(self, path: Path | None, **options: Any) -> Sequence:
+        """Open the dataset at ``path`` (options are the keyword arguments this method declares)."""
+
+    @abstractmethod
+    def write(self, sequence: Sequence, out_dir: Path, frames: Iterable[Frame]) -> Path:
+        """Write ``sequence`` under the empty folder ``out_dir``, taking the decoded frames from
+        ``frames`` (``sequence``'s frames in order, perhaps behind a progress bar); return the
+        path that ``open`` reads the copy back from."""
+
+    def option_names(self) -> list[str]:
+        """Keyword options ``open`` accepts."""
+        params = inspect.signature(self.open).parameters.values()
+        return [p.name for p in params if p.kind is inspect.Parameter.KEYWORD_ONLY]
+
+
+DATASETS: EntryPointRegistry[DatasetKind] = EntryPointRegistry("sal.datasets", "dataset kind")
+
+
+def open_dataset(
+    kind: str,
+    path: str | Path | None = None,
+    *,
+    start: int = 0,
+    max_frames: int | None = None,
+    **options: Any,
+) -> Sequence:
+    """Open a dataset as a lazily decoded ``Sequence``.
+
+    Args:
+        kind: ``kitti``, ``tum``, ``euroc``, ``folder``, ``synthetic`` or a plug-in kind.
+        path: the dataset folder (optional for ``synthetic``).
+        start: first frame to keep (0-based).
+        max_frames: keep at most this many frames from ``start``.
+        options: kind-specific options, e.g. ``sequence="07"``, ``stereo=True``.
+
+    Raises:
+        DatasetError: the folder, a file or an option is wrong (the message names it).
+    """
+    dataset = DATASETS.get(kind)
+    allowed = dataset.option_names()
+    unknown = sorted(set(options) - set(allowed))
+    if unknown:
+        raise DatasetError(
+            f"unknown option{'s' if len(unknown) > 1 else ''} {', '.join(map(repr, unknown))} for dataset kind {kind!r}; "
+            f"allowed: start, max_frames, {', '.join(allowed)}"
+        )
+    if path is not None:
+        path = Path(path).expanduser()
+        if not path.exists():
+            raise DatasetError(f"{kind} dataset folder not found", path)
+        if not path.is_dir():
+            raise DatasetError(f"{kind} dataset path is not a folder", path)
+    sequence = dataset.open(path, **options)
+    return truncate(sequence, start, max_frames)
+
+
+def truncate(sequence: Sequence, start: int = 0, max_frames: int | None = None) -> Sequence:
+    """Frames ``start .. start + max_frames - 1``; time-indexed ground truth is cropped to
+    their time span (plus one frame period either side)."""
+    if start < 0:
+        raise DatasetError(f"start must be >= 0 (frame number), got {start}")
+    if max_frames is not None and max_frames < 1:
+        raise DatasetError(f"max_frames must be >= 1, got {max_frames}")
+    if start == 0 and (max_frames is None or max_frames >= len(sequence)):
+        return sequence
+    if start >= len(sequence):
+        raise DatasetError(f"start={start} is past the last frame: {sequence.name} has {len(sequence)} frames")
+    stop = len(sequence) if max_frames is None else min(len(sequence), start + max_frames)
+    was_per_frame = sequence.groundtruth_is_per_frame
+    cut = sequence.select(range(start, stop))
+    if cut.groundtruth is not None and not was_per_frame:
+        margin = 1.0 / sequence.fps
+        t = cut.timestamps
+        cut = cut.replace(groundtruth=cut.groundtruth.crop(t[0] - margin, t[-1] + margin))
+    return cut
+
+
+def write_sequence(sequence: Sequence, out_dir: str | Path, layout: str | None = None, progress: bool = False) -> Path:
+    """Write ``sequence`` in its own dataset layout (or ``layout``) under ``out_dir``.
+
+    The folder is filled through a temporary sibling and renamed into place, so a run killed
+    midway leaves no half-written copy. An existing ``out_dir`` must be empty or an earlier
+    output of this function (it is replaced). Never writes into the sequence's source folder.
+
+    Returns:
+        The path to give ``open_dataset(layout, path)`` to read the copy back.
+    """
+    kind = layout or sequence.kind
+    dataset = DATASETS.get(kind)
+    out_dir = Path(out_dir).expanduser().resolve()
+    _refuse_source_overlap(sequence, out_dir)
+    if out_dir.exists() and any(out_dir.iterdir()) and not (out_dir / WRITTEN_MARKER).is_file():
+        raise DatasetError("output folder is not empty and was not written by pytest-sal; choose an empty folder", out_dir)
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.partial-", dir=out_dir.parent))
+    try:
+        frames: Iterable[Frame] = iter(sequence)
+        if progress:
+            frames = tqdm(frames, total=len(sequence), desc=f"writing {sequence.name}", unit="frame")
+        reopen = dataset.write(sequence, staging, frames)
+        marker = {
+            "layout": kind,
+            "path": str(reopen.relative_to(staging)),
+            "name": sequence.name,
+            "frames": len(sequence),
+            "source_fingerprint": sequence.fingerprint,
+        }
+        (staging / WRITTEN_MARKER).write_text(json.dumps(marker, indent=2) + "\n")
+        if out_dir.exists():
+            shutil.rmtree(out_dir)
+        staging.rename(out_dir)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    return out_dir / marker["path"]
+
+
+def _refuse_source_overlap(sequence: Sequence, out_dir: Path) -> None:
+    if sequence.source is None:
+        return
+    source = sequence.source.resolve()
+    if out_dir == source or out_dir.is_relative_to(source) or source.is_relative_to(out_dir):
+        raise DatasetError(f"refusing to write into the source dataset folder {source}; choose another output folder", out_dir)

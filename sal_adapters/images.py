@@ -1,0 +1,106 @@
+"""Decoding and encoding of frame images and depth maps, with errors that name the file."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from sal_adapters.errors import DatasetError
+
+__all__ = ["IMAGE_SUFFIXES", "read_image", "read_depth", "write_image", "write_depth", "is_grey"]
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".pgm")
+
+
+def read_image(path: Path) -> np.ndarray:
+    """Decode an image file to HxWx3 uint8 RGB (grey images are expanded to three channels)."""
+    raw = _imread(path, cv2.IMREAD_UNCHANGED)
+    if raw.dtype == np.uint16:
+        raw = (raw >> 8).astype(np.uint8)
+    elif raw.dtype != np.uint8:
+        raise DatasetError(f"unsupported image pixel type {raw.dtype} (expected 8- or 16-bit)", path)
+    if raw.ndim == 2:
+        return cv2.cvtColor(raw, cv2.COLOR_GRAY2RGB)
+    if raw.shape[2] == 4:
+        return cv2.cvtColor(raw, cv2.COLOR_BGRA2RGB)
+    return cv2.cvtColor(raw, cv2.COLOR_BGR2RGB)
+
+
+def read_depth(path: Path, depth_scale: float | None) -> np.ndarray:
+    """Decode a depth map to float32 metres (0 = invalid).
+
+    ``.npy`` files hold metres already; 16-bit images hold ``metres * depth_scale``
+    (TUM: 5000).
+    """
+    path = Path(path)
+    if path.suffix == ".npy":
+        try:
+            depth = np.load(path, allow_pickle=False)
+        except (OSError, ValueError) as exc:
+            raise DatasetError(f"cannot read depth array ({exc})", path) from None
+        if depth.ndim != 2:
+            raise DatasetError(f"depth array must be 2-D, got shape {depth.shape}", path)
+        return depth.astype(np.float32, copy=False)
+    raw = _imread(path, cv2.IMREAD_UNCHANGED)
+    if raw.ndim != 2:
+        raise DatasetError(f"depth image must have one channel, got {raw.shape[2]}", path)
+    if depth_scale is None or depth_scale <= 0:
+        raise DatasetError("depth image needs a positive depth scale (units per metre)", path)
+    return raw.astype(np.float32) / np.float32(depth_scale)
+
+
+def write_image(path: Path, rgb: np.ndarray, grey: bool = False) -> None:
+    """Encode HxWx3 RGB (or HxW grey) uint8; ``grey=True`` stores one channel (luma)."""
+    if rgb.ndim == 3 and grey:
+        data = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
+    elif rgb.ndim == 3:
+        data = cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)
+    else:
+        data = rgb
+    _imwrite(path, data)
+
+
+def write_depth(path: Path, depth_m: np.ndarray, depth_scale: float | None) -> None:
+    """Store float32 metres: ``.npy`` exactly, a 16-bit image as ``round(m * depth_scale)``."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if path.suffix == ".npy":
+        tmp = path.with_name(f".{path.name}.tmp.npy")
+        np.save(tmp, np.asarray(depth_m, dtype=np.float32), allow_pickle=False)
+        os.replace(tmp, path)
+        return
+    if depth_scale is None:
+        raise ValueError(f"{path}: a 16-bit depth image needs a depth scale")
+    raw = np.clip(np.round(depth_m * depth_scale), 0, 65535).astype(np.uint16)
+    _imwrite(path, raw)
+
+
+def is_grey(rgb: np.ndarray) -> bool:
+    """True when all three channels are equal (a grey image stored as RGB)."""
+    return rgb.ndim == 2 or (np.array_equal(rgb[..., 0], rgb[..., 1]) and np.array_equal(rgb[..., 1], rgb[..., 2]))
+
+
+def _imread(path: Path, flags: int) -> np.ndarray:
+    path = Path(path)
+    if not path.is_file():
+        raise DatasetError("image file not found", path)
+    data = np.fromfile(path, dtype=np.uint8)
+    image = cv2.imdecode(data, flags) if data.size else None
+    if image is None:
+        raise DatasetError("cannot decode image (corrupt or not an image)", path)
+    return image
+
+
+def _imwrite(path: Path, data: np.ndarray) -> None:
+    """Encode to memory, then write through a temporary file and ``os.replace``."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    ok, encoded = cv2.imencode(path.suffix or ".png", data)
+    if not ok:
+        raise ValueError(f"{path}: OpenCV cannot encode this image type")
+    tmp = path.with_name(f".{path.name}.tmp")
+    encoded.tofile(tmp)
+    os.replace(tmp, path)

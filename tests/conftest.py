@@ -1,0 +1,34 @@
+"""Shared fixtures: the real data excerpts in ../shared/data and an isolated cache folder."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+pytest_plugins = ["pytester"]
+
+#: The real KITTI / EuRoC / TUM excerpts; override with SAL_TEST_DATA.
+SHARED_DATA = Path(os.environ.get("SAL_TEST_DATA", Path(__file__).resolve().parents[1].parent / "shared" / "data"))
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    """Root of the real dataset excerpts; tests that need it skip when it is absent."""
+    if not SHARED_DATA.is_dir():
+        pytest.skip(f"real dataset excerpts not found at {SHARED_DATA} (set SAL_TEST_DATA to the shared/data folder)")
+    return SHARED_DATA
+
+
+@pytest.fixture(scope="session", autouse=True)
+def isolated_sal_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Every test session renders and caches into its own folder, never the user's cache."""
+    root = tmp_path_factory.mktemp("sal-cache")
+    previous = os.environ.get("SAL_CACHE_DIR")
+    os.environ["SAL_CACHE_DIR"] = str(root)
+    yield root
+    if previous is None:
+        os.environ.pop("SAL_CACHE_DIR", None)
+    else:
+        os.environ["SAL_CACHE_DIR"] = previous
