@@ -115,7 +115,8 @@ def truncate(sequence: Sequence, start: int = 0, max_frames: int | None = None) 
     if cut.groundtruth is not None and not was_per_frame:
         margin = 1.0 / sequence.fps
         t = cut.timestamps
-        cut = cut.replace(groundtruth=cut.groundtruth.crop(t[0] - margin, t[-1] + margin))
+        cropped = cut.groundtruth.crop(t[0] - margin, t[-1] + margin)
+        cut = cut.replace(groundtruth=cropped if len(cropped) else None)
     return cut
 
 

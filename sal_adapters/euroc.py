@@ -1,0 +1,519 @@
+"""EuRoC MAV layout: ``<sequence>/mav0/cam0|cam1/{data.csv, data/<ns>.png, sensor.yaml}``,
+``imu0/``, ``body.yaml`` and ``state_groundtruth_estimate0/data.csv``.
+
+Frames are named by their capture time in integer nanoseconds. Each camera's ``sensor.yaml``
+holds its intrinsics ``[fu, fv, cu, cv]`` (px), radial-tangential distortion ``[k1, k2, p1, p2]``,
+resolution, rate (Hz) and ``T_BS``, its pose in the body (IMU) frame. The right camera sits at
+``T_left_right = inv(T_BS_cam0) @ T_BS_cam1`` in the left camera frame. The standard ground truth
+gives body poses ``T_WB``; the camera-0 poses are ``T_WC = T_WB @ T_BS_cam0``.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+import warnings
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import yaml
+
+from sal_adapters.camera import Camera
+from sal_adapters.datasets import DatasetKind
+from sal_adapters.errors import DatasetError, DatasetWarning
+from sal_adapters.images import write_image
+from sal_adapters.sequence import Frame, FrameRecord, Sequence
+from sal_adapters.textfiles import atomic_write_text, read_rows
+from sal_adapters.trajectory import Trajectory, seconds_to_ns
+
+__all__ = ["EUROC", "EurocDataset", "CameraSensor", "FrameRow", "read_camera_sensor", "read_sensor_yaml", "read_frame_csv"]
+
+#: Keys every camera ``sensor.yaml`` must hold.
+CAMERA_KEYS = ("T_BS", "rate_hz", "resolution", "intrinsics", "distortion_coefficients")
+GROUNDTRUTH_FRAMES = ("body", "camera")
+FRAME_CSV_HEADER = "#timestamp [ns],filename"
+_RADTAN_NAMES = ("radial-tangential", "radtan", "plumb_bob", "none")
+
+
+@dataclass(frozen=True)
+class CameraSensor:
+    """One camera's ``sensor.yaml``: intrinsics and distortion, rate (Hz) and pose in the body
+    frame (``T_BS``, 4x4)."""
+
+    camera: Camera
+    rate_hz: float
+    T_BS: np.ndarray
+
+
+@dataclass(frozen=True)
+class FrameRow:
+    """One ``data.csv`` row: its line number, time (ns) and image file."""
+
+    line: int
+    ns: int
+    file: Path
+
+
+class EurocDataset(DatasetKind):
+    """EuRoC MAV sequences (grey, mono or unrectified stereo, ns timestamps)."""
+
+    name = "euroc"
+    description = "EuRoC MAV: <seq>/mav0/cam0|cam1/{data.csv,data/<ns>.png,sensor.yaml}, state_groundtruth_estimate0/"
+
+    def open(
+        self,
+        path: Path | None,
+        *,
+        sequence: str | None = None,
+        stereo: bool = False,
+        groundtruth: str | Path | None = None,
+        groundtruth_frame: str | None = None,
+    ) -> Sequence:
+        """Open a EuRoC sequence.
+
+        Args:
+            path: the sequence folder (holding ``mav0/``), ``mav0/`` itself, or a parent folder
+                (then ``sequence`` names the sub-folder, e.g. ``"V1_01_easy"``).
+            sequence: sub-folder of ``path`` holding the sequence.
+            stereo: also load ``cam1``; frames are the cam0/cam1 rows with the same ns time.
+            groundtruth: an EuRoC CSV (``ns, p xyz [m], q wxyz``) to use as ground truth instead of
+                the one found in the folder.
+            groundtruth_frame: ``"body"`` (poses of the IMU/body frame, moved to cam0 with
+                ``T_BS``) or ``"camera"`` (poses of cam0 already). Default: ``body`` for
+                ``groundtruth=`` and ``state_groundtruth_estimate0/data.csv``, ``camera`` for a
+                ``groundtruth*.csv`` / ``*_GT*.csv`` file in the sequence folder (ORB-SLAM3
+                evaluation files).
+
+        Raises:
+            DatasetError: a folder, file, line or option is wrong (the message names it).
+        """
+        if groundtruth_frame is not None and groundtruth_frame not in GROUNDTRUTH_FRAMES:
+            raise DatasetError(f"groundtruth_frame must be 'body' or 'camera', got {groundtruth_frame!r}")
+        seq_dir = _sequence_dir(path, sequence)
+        mav0 = seq_dir / "mav0"
+        left = read_camera_sensor(mav0 / "cam0" / "sensor.yaml")
+        rows0 = read_frame_csv(mav0 / "cam0" / "data.csv")
+        rows1: list[FrameRow] = []
+        right: CameraSensor | None = None
+        if stereo:
+            csv1 = mav0 / "cam1" / "data.csv"
+            if not csv1.is_file():
+                raise DatasetError("stereo=True needs the right camera, but its frame list is missing", csv1)
+            right = read_camera_sensor(mav0 / "cam1" / "sensor.yaml")
+            rows1 = read_frame_csv(csv1)
+        pairs = _usable_frames(rows0, rows1, stereo, mav0)
+        if not pairs:
+            raise DatasetError("no frame has its image file" + (" in both cameras" if stereo else ""), mav0 / "cam0" / "data.csv")
+
+        camera = left.camera
+        meta: dict[str, Any] = {"sequence": seq_dir.name, "T_BS_cam0": _flat(left.T_BS)}
+        if right is not None:
+            T_lr = np.linalg.inv(left.T_BS) @ right.T_BS
+            same = _same_intrinsics(left.camera, right.camera)
+            camera = camera.with_stereo(T_lr, right=None if same else right.camera)
+            meta["T_BS_cam1"] = _flat(right.T_BS)
+        records = [
+            FrameRecord(
+                index=position,
+                timestamp=row.ns * 1e-9,
+                stem=row.file.stem,
+                image=row.file,
+                right=None if partner is None else partner.file,
+                timestamp_ns=row.ns,
+            )
+            for position, row, partner in pairs
+        ]
+        return Sequence(
+            kind=self.name,
+            name=f"euroc/{seq_dir.name}",
+            camera=camera,
+            sensor="stereo" if stereo else "mono",
+            fps=left.rate_hz,
+            records=records,
+            groundtruth=_groundtruth(seq_dir, left.T_BS, groundtruth, groundtruth_frame),
+            grayscale=_is_single_channel(records[0].image),
+            source=seq_dir,
+            meta=meta,
+        )
+
+    def write(self, sequence: Sequence, out_dir: Path, frames: Iterable[Frame]) -> Path:
+        """Write ``out_dir/<name>/mav0/...`` and return ``out_dir/<name>``.
+
+        Images are PNG files named by their ns time (``FrameRecord.timestamp_ns``, else the
+        rounded time in s); ``data.csv`` lists exactly the frames written. A EuRoC source keeps
+        its ``T_BS`` (and ``imu0/``, ``body.yaml``); any other source gets cam0 as body frame.
+        Ground truth is written as body poses in ``state_groundtruth_estimate0/data.csv``.
+        """
+        from_euroc = sequence.kind == self.name and "T_BS_cam0" in sequence.meta
+        seq_dir = out_dir / _folder_name(sequence, from_euroc)
+        mav0 = seq_dir / "mav0"
+        stereo = sequence.sensor == "stereo"
+        if sequence.sensor == "rgbd":
+            warnings.warn(
+                f"{sequence.name}: the EuRoC layout has no depth maps; writing the images only (mono)",
+                DatasetWarning,
+                stacklevel=3,
+            )
+        T_BS0, T_BS1 = _extrinsics_for(sequence, from_euroc)
+        grey = sequence.grayscale
+        stamps: list[int] = []
+        for frame in frames:
+            record = frame.record
+            ns = record.timestamp_ns if record.timestamp_ns is not None else seconds_to_ns(record.timestamp)
+            if stamps and ns <= stamps[-1]:
+                raise DatasetError(
+                    f"EuRoC names frames by their time in ns, which must increase: frame {record.index} "
+                    f"at {ns} ns follows {stamps[-1]} ns",
+                    sequence.source,
+                )
+            stamps.append(ns)
+            write_image(mav0 / "cam0" / "data" / f"{ns}.png", _sized(frame.image, sequence.camera, sequence, record), grey=grey)
+            if stereo:
+                right = _sized(frame.right, sequence.camera.right or sequence.camera, sequence, record)
+                write_image(mav0 / "cam1" / "data" / f"{ns}.png", right, grey=grey)
+
+        cameras = [("cam0", sequence.camera, T_BS0)]
+        if stereo:
+            cameras.append(("cam1", sequence.camera.right or sequence.camera, T_BS1))
+        for cam_name, camera, T_BS in cameras:
+            csv = "".join(f"{ns},{ns}.png\n" for ns in stamps)
+            atomic_write_text(mav0 / cam_name / "data.csv", FRAME_CSV_HEADER + "\n" + csv)
+            text = _sensor_yaml(camera, T_BS, sequence.fps, f"{cam_name} of {sequence.name}, written by pytest-sal")
+            atomic_write_text(mav0 / cam_name / "sensor.yaml", text)
+
+        if sequence.groundtruth is not None:
+            body = sequence.groundtruth.transformed(right=np.linalg.inv(T_BS0))
+            body.write_euroc(mav0 / "state_groundtruth_estimate0" / "data.csv")
+            atomic_write_text(mav0 / "state_groundtruth_estimate0" / "sensor.yaml", _GT_SENSOR_YAML)
+        source_mav0 = None if sequence.source is None else sequence.source / "mav0"
+        if from_euroc and source_mav0 is not None:
+            if (source_mav0 / "imu0").is_dir():
+                shutil.copytree(source_mav0 / "imu0", mav0 / "imu0")
+            if (source_mav0 / "body.yaml").is_file():
+                shutil.copy2(source_mav0 / "body.yaml", mav0 / "body.yaml")
+        return seq_dir
+
+
+# -- reading ---------------------------------------------------------------------------------------
+def read_sensor_yaml(path: Path) -> dict[str, Any]:
+    """Parse a EuRoC ``sensor.yaml`` (the OpenCV ``%YAML:1.0`` directive is dropped)."""
+    path = Path(path)
+    if not path.is_file():
+        raise DatasetError("sensor file not found", path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DatasetError(f"cannot read text file ({exc})", path) from None
+    text = re.sub(r"\A%YAML[: ]\s*1\.\d+[^\n]*", "", text)  # keeps the line numbers
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        line = None if mark is None else mark.line + 1
+        raise DatasetError(f"cannot parse YAML ({getattr(exc, 'problem', None) or exc})", path, line) from None
+    if not isinstance(data, dict):
+        raise DatasetError("expected a YAML mapping of sensor keys", path)
+    return data
+
+
+def read_camera_sensor(path: Path) -> CameraSensor:
+    """Camera, rate (Hz) and ``T_BS`` from a camera ``sensor.yaml``; every key of ``CAMERA_KEYS``
+    must be present."""
+    path = Path(path)
+    data = read_sensor_yaml(path)
+    missing = [key for key in CAMERA_KEYS if key not in data]
+    if missing:
+        raise DatasetError(f"missing key {', '.join(map(repr, missing))} (a camera sensor.yaml needs {', '.join(CAMERA_KEYS)})", path)
+    model = str(data.get("camera_model", "pinhole"))
+    if model != "pinhole":
+        raise DatasetError(f"camera_model {model!r} is not supported (pinhole only)", path)
+    dist_model = str(data.get("distortion_model", "radial-tangential"))
+    if dist_model not in _RADTAN_NAMES:
+        raise DatasetError(f"distortion_model {dist_model!r} is not supported (radial-tangential only)", path)
+    intrinsics = _numbers(data, "intrinsics", path, (4,))
+    resolution = _numbers(data, "resolution", path, (2,))
+    distortion = _numbers(data, "distortion_coefficients", path, (0, 4, 5))
+    T_BS = _matrix(data["T_BS"], path)
+    rate = data["rate_hz"]
+    if isinstance(rate, bool) or not isinstance(rate, (int, float)) or not 0 < rate < float("inf"):
+        raise DatasetError(f"key 'rate_hz' must be a positive number (Hz), got {rate!r}", path)
+    if any(v != int(v) for v in resolution):
+        raise DatasetError(f"key 'resolution' must be two integers [width, height] (px), got {data['resolution']!r}", path)
+    try:
+        camera = Camera(*intrinsics, width=int(resolution[0]), height=int(resolution[1]), distortion=tuple(distortion))
+    except ValueError as exc:
+        raise DatasetError(str(exc), path) from None
+    return CameraSensor(camera=camera, rate_hz=float(rate), T_BS=T_BS)
+
+
+def read_frame_csv(path: Path) -> list[FrameRow]:
+    """Rows of a camera ``data.csv``: ``timestamp [ns], filename`` (relative to ``data/``).
+
+    Timestamps must be integers and increase; a bad line raises ``DatasetError`` with its number.
+    """
+    path = Path(path)
+    folder = path.parent / "data"
+    rows: list[FrameRow] = []
+    for number, fields in read_rows(path, delimiter=","):
+        if not rows and fields[0].lower().startswith("timestamp"):
+            continue  # a header written without '#'
+        if len(fields) != 2 or not fields[1]:
+            raise DatasetError(f"expected 2 comma-separated values (timestamp [ns], filename), got {len(fields)}", path, number)
+        if not fields[0].isdigit():
+            raise DatasetError(f"expected an integer timestamp in ns, got {fields[0]!r}", path, number)
+        ns = int(fields[0])
+        if rows and ns <= rows[-1].ns:
+            raise DatasetError(f"timestamp {ns} ns does not increase (previous row: {rows[-1].ns} ns)", path, number)
+        rows.append(FrameRow(number, ns, folder / fields[1]))
+    return rows
+
+
+def _usable_frames(
+    rows0: list[FrameRow], rows1: list[FrameRow], stereo: bool, mav0: Path
+) -> list[tuple[int, FrameRow, FrameRow | None]]:
+    """``(cam0 row position, cam0 row, cam1 row)`` of the frames whose images exist (and pair up);
+    one ``DatasetWarning`` per ``data.csv`` that loses rows."""
+    present0 = _present(rows0)
+    if not stereo:
+        _warn_dropped(mav0 / "cam0" / "data.csv", len(rows0), len(rows0) - len(present0), 0, "")
+        return [(i, row, None) for i, row in enumerate(rows0) if row.ns in present0]
+    present1 = _present(rows1)
+    paired = present0.keys() & present1.keys()
+    _warn_dropped(mav0 / "cam0" / "data.csv", len(rows0), len(rows0) - len(present0), len(present0) - len(paired), "cam1")
+    _warn_dropped(mav0 / "cam1" / "data.csv", len(rows1), len(rows1) - len(present1), len(present1) - len(paired), "cam0")
+    return [(i, row, present1[row.ns]) for i, row in enumerate(rows0) if row.ns in paired]
+
+
+def _present(rows: list[FrameRow]) -> dict[int, FrameRow]:
+    """Rows whose image file exists, by ns (one directory listing per folder)."""
+    listings: dict[Path, set[str]] = {}
+    out = {}
+    for row in rows:
+        folder = row.file.parent
+        if folder not in listings:
+            listings[folder] = {p.name for p in folder.iterdir()} if folder.is_dir() else set()
+        if row.file.name in listings[folder]:
+            out[row.ns] = row
+    return out
+
+
+def _warn_dropped(csv: Path, total: int, missing: int, unpaired: int, other: str) -> None:
+    if not missing and not unpaired:
+        return
+    reasons = []
+    if missing:
+        reasons.append(f"{missing} name image files that do not exist")
+    if unpaired:
+        reasons.append(f"{unpaired} have no {other} image at the same ns timestamp")
+    warnings.warn(
+        f"{csv}: {missing + unpaired} of {total} rows skipped: {'; '.join(reasons)}",
+        DatasetWarning,
+        stacklevel=4,
+    )
+
+
+def _groundtruth(seq_dir: Path, T_BS0: np.ndarray, explicit: str | Path | None, frame: str | None) -> Trajectory | None:
+    """Camera-0 poses from ``explicit``, ``state_groundtruth_estimate0/data.csv`` or a single
+    ``groundtruth*.csv`` / ``*_GT*.csv`` in the sequence folder; ``None`` when there is none."""
+    T_gt_body = np.eye(4)
+    if explicit is not None:
+        path = Path(explicit).expanduser()
+        if not path.is_file() and not path.is_absolute() and (seq_dir / path).is_file():
+            path = seq_dir / path
+        if not path.is_file():
+            raise DatasetError("ground-truth file not found", path)
+        default = "body"
+    elif (seq_dir / "mav0" / "state_groundtruth_estimate0" / "data.csv").is_file():
+        gt_dir = seq_dir / "mav0" / "state_groundtruth_estimate0"
+        path, default = gt_dir / "data.csv", "body"
+        if (gt_dir / "sensor.yaml").is_file():
+            data = read_sensor_yaml(gt_dir / "sensor.yaml")
+            if "T_BS" in data:  # pose of the estimated frame in the body frame
+                T_gt_body = np.linalg.inv(_matrix(data["T_BS"], gt_dir / "sensor.yaml"))
+    else:
+        found = sorted(
+            p for p in seq_dir.glob("*.csv") if p.is_file() and (p.name.lower().startswith("groundtruth") or "_GT" in p.name)
+        )
+        if not found:
+            return None
+        if len(found) > 1:
+            warnings.warn(
+                f"{seq_dir}: several ground-truth files ({', '.join(p.name for p in found)}); "
+                "opening without ground truth (pass groundtruth=...)",
+                DatasetWarning,
+                stacklevel=3,
+            )
+            return None
+        path, default = found[0], "camera"
+    trajectory = Trajectory.read_euroc(path)
+    if (frame or default) == "camera":
+        return trajectory
+    return trajectory.transformed(right=T_gt_body @ T_BS0)
+
+
+def _sequence_dir(path: Path | None, sequence: str | None) -> Path:
+    if path is None:
+        raise DatasetError("the euroc dataset needs a path (the sequence folder holding mav0/)")
+    path = Path(path)
+    if not path.is_dir():
+        raise DatasetError("EuRoC folder not found", path)
+    if sequence is not None:
+        candidate = path / str(sequence)
+        if (candidate / "mav0").is_dir():
+            return candidate
+        if path.name == str(sequence) and (path / "mav0").is_dir():
+            return path
+        raise DatasetError(f"sequence {str(sequence)!r} not found (looked for {sequence}/mav0/)", path)
+    if (path / "mav0").is_dir():
+        return path
+    if path.name == "mav0" and (path / "cam0").is_dir():
+        return path.parent
+    found = sorted(p.name for p in path.iterdir() if (p / "mav0").is_dir())
+    if len(found) == 1:
+        return path / found[0]
+    if found:
+        raise DatasetError(f"several EuRoC sequences found ({', '.join(found)}); pass sequence=", path)
+    raise DatasetError("not a EuRoC sequence folder (no mav0/ in it or in a sub-folder)", path)
+
+
+def _is_single_channel(source: Any) -> bool:
+    """True when the image file stores one channel (EuRoC cameras are grey)."""
+    if not isinstance(source, Path):
+        return True
+    image = cv2.imdecode(np.fromfile(source, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+    if image is None:
+        raise DatasetError("cannot decode image (corrupt or not an image)", source)
+    return image.ndim == 2
+
+
+def _numbers(data: dict[str, Any], key: str, path: Path, counts: tuple[int, ...]) -> list[float]:
+    """The list of numbers under ``key``; its length must be one of ``counts``."""
+    value = data[key]
+    numbers: list[float] | None = None
+    if isinstance(value, (list, tuple)):
+        try:
+            numbers = [float(v) for v in value]
+        except (TypeError, ValueError):
+            numbers = None
+    if numbers is None or len(numbers) not in counts or not np.all(np.isfinite(numbers)):
+        expected = " or ".join(map(str, counts))
+        raise DatasetError(f"key {key!r} must be a list of {expected} numbers, got {value!r}", path)
+    return numbers
+
+
+def _matrix(value: Any, path: Path) -> np.ndarray:
+    """A 4x4 ``T_BS`` from ``{cols: 4, rows: 4, data: [16 numbers]}`` (or a nested list)."""
+    data = value.get("data") if isinstance(value, dict) else value
+    try:
+        T = np.array(data, dtype=np.float64).reshape(4, 4)
+    except (TypeError, ValueError):
+        raise DatasetError(f"key 'T_BS' must hold 16 numbers (4x4 row-major), got {value!r}", path) from None
+    if isinstance(value, dict) and (value.get("rows", 4) != 4 or value.get("cols", 4) != 4):
+        raise DatasetError("key 'T_BS' must be 4 rows x 4 cols", path)
+    if not np.all(np.isfinite(T)) or abs(np.linalg.det(T[:3, :3]) - 1.0) > 1e-3:
+        raise DatasetError("key 'T_BS' is not a rigid transform (its rotation has determinant != 1)", path)
+    return T
+
+
+def _same_intrinsics(a: Camera, b: Camera) -> bool:
+    return (a.fx, a.fy, a.cx, a.cy, a.width, a.height, tuple(a.distortion)) == (
+        b.fx, b.fy, b.cx, b.cy, b.width, b.height, tuple(b.distortion)
+    )
+
+
+def _flat(T: np.ndarray) -> list[float]:
+    return [float(v) for v in np.ravel(T)]
+
+
+# -- writing ---------------------------------------------------------------------------------------
+_GT_SENSOR_YAML = """%YAML:1.0
+# General sensor definitions.
+sensor_type: visual-inertial
+comment: Body (IMU) frame poses, written by pytest-sal.
+
+# Sensor extrinsics wrt. the body-frame.
+T_BS:
+  cols: 4
+  rows: 4
+  data: [1.0, 0.0, 0.0, 0.0,
+         0.0, 1.0, 0.0, 0.0,
+         0.0, 0.0, 1.0, 0.0,
+         0.0, 0.0, 0.0, 1.0]
+"""
+
+
+def _folder_name(sequence: Sequence, from_euroc: bool) -> str:
+    name = str(sequence.meta.get("sequence", "")) if from_euroc else ""
+    name = name or sequence.name.replace("\\", "/").rstrip("/").rsplit("/", 1)[-1]
+    name = re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._")
+    return name or "sequence"
+
+
+def _extrinsics_for(sequence: Sequence, from_euroc: bool) -> tuple[np.ndarray, np.ndarray | None]:
+    """``T_BS`` of cam0 and cam1: a EuRoC source keeps its own (cam1 follows the camera's
+    ``T_left_right``); anything else takes cam0 as the body frame."""
+    T_BS0 = np.asarray(sequence.meta["T_BS_cam0"], dtype=np.float64).reshape(4, 4) if from_euroc else np.eye(4)
+    T_lr = sequence.camera.T_lr
+    if sequence.sensor != "stereo":
+        return T_BS0, None
+    if T_lr is None:
+        raise DatasetError(f"{sequence.name}: a stereo sequence needs the camera's T_left_right or baseline_m to write cam1")
+    if from_euroc and "T_BS_cam1" in sequence.meta:
+        T_BS1 = np.asarray(sequence.meta["T_BS_cam1"], dtype=np.float64).reshape(4, 4)
+        if np.array_equal(np.linalg.inv(T_BS0) @ T_BS1, T_lr):
+            return T_BS0, T_BS1  # unchanged extrinsics: keep the source's exact values
+    return T_BS0, T_BS0 @ T_lr
+
+
+def _sized(image: np.ndarray, camera: Camera, sequence: Sequence, record: FrameRecord) -> np.ndarray:
+    """``image`` after checking it has the camera's size (sensor.yaml stores one resolution)."""
+    if image.shape[:2] != (camera.height, camera.width):
+        raise DatasetError(
+            f"{sequence.name}: frame {record.index} is {image.shape[1]}x{image.shape[0]} px but the camera "
+            f"is {camera.width}x{camera.height} px"
+        )
+    return image
+
+
+def _sensor_yaml(camera: Camera, T_BS: np.ndarray, fps: float, comment: str) -> str:
+    """A camera ``sensor.yaml`` that reads back to exactly ``camera`` (values as shortest floats)."""
+    T = [_yaml_float(v) for v in np.ravel(T_BS)]
+    rows = ",\n         ".join(", ".join(T[4 * r : 4 * r + 4]) for r in range(4))
+    intrinsics = ", ".join(_yaml_float(v) for v in (camera.fx, camera.fy, camera.cx, camera.cy))
+    distortion = ", ".join(_yaml_float(v) for v in camera.distortion)
+    return (
+        "%YAML:1.0\n"
+        "# General sensor definitions.\n"
+        "sensor_type: camera\n"
+        f"comment: {_yaml_string(comment)}\n\n"
+        "# Sensor extrinsics wrt. the body-frame.\n"
+        "T_BS:\n  cols: 4\n  rows: 4\n"
+        f"  data: [{rows}]\n\n"
+        "# Camera specific definitions.\n"
+        f"rate_hz: {_yaml_float(fps)}\n"
+        f"resolution: [{int(camera.width)}, {int(camera.height)}]\n"
+        "camera_model: pinhole\n"
+        f"intrinsics: [{intrinsics}] #fu, fv, cu, cv\n"
+        "distortion_model: radial-tangential\n"
+        f"distortion_coefficients: [{distortion}]\n"
+    )
+
+
+def _yaml_float(value: float) -> str:
+    """Shortest round-trip text of a float that YAML 1.1 also reads as a float (``1.0e-05``)."""
+    text = repr(float(value))
+    mantissa, e, exponent = text.partition("e")
+    if e and "." not in mantissa:
+        text = f"{mantissa}.0e{exponent}"
+    return text
+
+
+def _yaml_string(text: str) -> str:
+    return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+EUROC = EurocDataset()
