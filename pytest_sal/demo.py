@@ -11,9 +11,9 @@ from pathlib import Path
 
 from tqdm.auto import tqdm
 
+from pytest_sal.preview import contact_sheet
 from sal_adapters import open_dataset
 from sal_adapters.images import write_image
-from pytest_sal.preview import contact_sheet
 
 __all__ = ["DEMO_SCENES", "run_demo"]
 

@@ -7,7 +7,13 @@
 """
 
 from sal_adapters.camera import Camera
-from sal_adapters.datasets import DATASETS, DatasetKind, open_dataset, truncate, write_sequence
+from sal_adapters.datasets import (
+    DATASETS,
+    DatasetKind,
+    open_dataset,
+    truncate,
+    write_sequence,
+)
 from sal_adapters.errors import DatasetError, DatasetWarning, SalError
 from sal_adapters.sequence import SENSORS, Frame, FrameRecord, Sensor, Sequence
 from sal_adapters.trajectory import Trajectory

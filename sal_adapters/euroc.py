@@ -18,14 +18,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 import yaml
 
 from sal_adapters.camera import Camera
 from sal_adapters.datasets import DatasetKind
 from sal_adapters.errors import DatasetError, DatasetWarning
-from sal_adapters.images import write_image
+from sal_adapters.images import probe_image, write_image
 from sal_adapters.sequence import Frame, FrameRecord, Sequence
 from sal_adapters.textfiles import atomic_write_text, read_rows
 from sal_adapters.trajectory import Trajectory, seconds_to_ns
@@ -384,10 +383,7 @@ def _is_single_channel(source: Any) -> bool:
     """True when the image file stores one channel (EuRoC cameras are grey)."""
     if not isinstance(source, Path):
         return True
-    image = cv2.imdecode(np.fromfile(source, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
-    if image is None:
-        raise DatasetError("cannot decode image (corrupt or not an image)", source)
-    return image.ndim == 2
+    return probe_image(source)[2]
 
 
 def _numbers(data: dict[str, Any], key: str, path: Path, counts: tuple[int, ...]) -> list[float]:

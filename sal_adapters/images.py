@@ -10,7 +10,7 @@ import numpy as np
 
 from sal_adapters.errors import DatasetError
 
-__all__ = ["IMAGE_SUFFIXES", "read_image", "read_depth", "write_image", "write_depth", "is_grey"]
+__all__ = ["IMAGE_SUFFIXES", "probe_image", "read_image", "read_depth", "write_image", "write_depth", "is_grey"]
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".pgm")
 
@@ -27,6 +27,12 @@ def read_image(path: Path) -> np.ndarray:
     if raw.shape[2] == 4:
         return cv2.cvtColor(raw, cv2.COLOR_BGRA2RGB)
     return cv2.cvtColor(raw, cv2.COLOR_BGR2RGB)
+
+
+def probe_image(path: Path) -> tuple[int, int, bool]:
+    """``(width, height, single_channel)`` of an image file (decodes it once)."""
+    raw = _imread(path, cv2.IMREAD_UNCHANGED)
+    return int(raw.shape[1]), int(raw.shape[0]), raw.ndim == 2 or raw.shape[2] == 1
 
 
 def read_depth(path: Path, depth_scale: float | None) -> np.ndarray:

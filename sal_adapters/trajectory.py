@@ -16,7 +16,12 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from sal_adapters.errors import DatasetError
-from sal_adapters.textfiles import atomic_write_text, format_float, read_numeric_table, read_rows
+from sal_adapters.textfiles import (
+    atomic_write_text,
+    format_float,
+    read_numeric_table,
+    read_rows,
+)
 
 if TYPE_CHECKING:
     from evo.core.trajectory import PoseTrajectory3D

@@ -13,7 +13,16 @@ import numpy as np
 import pytest
 import yaml
 
-from sal_adapters import Camera, DatasetError, DatasetWarning, FrameRecord, Sequence, Trajectory, open_dataset, write_sequence
+from sal_adapters import (
+    Camera,
+    DatasetError,
+    DatasetWarning,
+    FrameRecord,
+    Sequence,
+    Trajectory,
+    open_dataset,
+    write_sequence,
+)
 from sal_adapters.euroc import EUROC
 
 SEQ = "V1_01_easy_micro"

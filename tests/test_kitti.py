@@ -8,7 +8,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sal_adapters import DatasetError, DatasetWarning, Trajectory, open_dataset, write_sequence
+from sal_adapters import (
+    DatasetError,
+    DatasetWarning,
+    Trajectory,
+    open_dataset,
+    write_sequence,
+)
 from sal_adapters.kitti import read_calib
 
 

@@ -1,0 +1,254 @@
+"""Pieces shared by the image-list layouts (``tum``, ``folder``): the ``camera.yaml`` file,
+timestamped file lists, camera options, natural sort and a first-image probe.
+
+``camera.yaml`` describes the pinhole camera of the images beside it::
+
+    # pytest-sal camera: pinhole intrinsics (px), OpenCV distortion, depth units per metre
+    fx: 520.9
+    fy: 521.0
+    cx: 325.1
+    cy: 249.7
+    width: 640             # optional: checked against the images when present
+    height: 480            # optional
+    distortion: [0.2312, -0.7849, -0.0033, -0.0001, 0.9172]   # optional, k1 k2 p1 p2 [k3 ...]
+    depth_scale: 5000.0    # optional: raw depth units per metre (TUM: 5000)
+
+The ``tum`` and ``folder`` writers always write it, and both readers prefer it to guessed
+intrinsics, so a written copy reopens with exactly the same camera.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Iterable
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from sal_adapters.camera import Camera
+from sal_adapters.errors import DatasetError
+from sal_adapters.sequence import Frame
+from sal_adapters.textfiles import atomic_write_text, format_float, read_rows
+
+__all__ = [
+    "CAMERA_FILE",
+    "read_camera_yaml",
+    "write_camera_yaml",
+    "select_camera",
+    "parse_numbers",
+    "read_list",
+    "fps_from_timestamps",
+    "natural_key",
+    "frame_file_stem",
+    "checked_image",
+]
+
+#: Name of the camera description the ``tum`` and ``folder`` layouts read and write.
+CAMERA_FILE = "camera.yaml"
+
+_CAMERA_KEYS = ("fx", "fy", "cx", "cy", "width", "height", "distortion", "depth_scale")
+#: Coefficient counts OpenCV accepts for ``distortion``.
+_DISTORTION_COUNTS = (4, 5, 8, 12, 14)
+
+
+# -- camera.yaml ------------------------------------------------------------------------------
+def read_camera_yaml(path: Path, width: int, height: int) -> Camera:
+    """Read ``camera.yaml`` for images of ``width`` x ``height`` px.
+
+    ``width``/``height`` in the file, when present, must match the images.
+
+    Raises:
+        DatasetError: naming the file and line of a YAML error, an unknown key, a missing or
+            invalid value or a size that differs from the images.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+        loader = yaml.SafeLoader(text)
+        try:
+            node = loader.get_single_node()
+            data = loader.construct_document(node) if node is not None else None
+        finally:
+            loader.dispose()
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        raise DatasetError(f"invalid YAML: {exc.problem or exc}", path, None if mark is None else mark.line + 1) from None
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        raise DatasetError(f"cannot read camera file ({exc})", path) from None
+    if not isinstance(data, dict):
+        raise DatasetError("expected a mapping of fx, fy, cx, cy[, width, height, distortion, depth_scale]", path)
+    lines = {str(k.value): k.start_mark.line + 1 for k, _ in node.value}
+
+    def fail(message: str, key: str | None = None) -> DatasetError:
+        return DatasetError(message, path, lines.get(key) if key else None)
+
+    unknown = [str(k) for k in data if k not in _CAMERA_KEYS]
+    if unknown:
+        raise fail(f"unknown key {unknown[0]!r} (allowed: {', '.join(_CAMERA_KEYS)})", unknown[0])
+    values: dict[str, Any] = {}
+    for key in ("fx", "fy", "cx", "cy"):
+        if key not in data:
+            raise fail(f"missing {key} (px)")
+        values[key] = _number(data[key], lambda m, k=key: fail(f"{k}: {m}", k))
+    for key, actual in (("width", width), ("height", height)):
+        if data.get(key) is not None:
+            given = _number(data[key], lambda m, k=key: fail(f"{k}: {m}", k))
+            if given != actual:
+                raise fail(f"{key} is {given:g} px but the images are {width}x{height} px", key)
+    distortion = data.get("distortion") or ()
+    if not isinstance(distortion, list | tuple) or len(distortion) not in (0, *_DISTORTION_COUNTS):
+        counts = ", ".join(map(str, _DISTORTION_COUNTS))
+        raise fail(f"distortion must be a list of {counts} numbers (k1 k2 p1 p2 [k3 ...]) or empty", "distortion")
+    values["distortion"] = tuple(_number(v, lambda m: fail(f"distortion: {m}", "distortion")) for v in distortion)
+    scale = data.get("depth_scale")
+    if scale is not None:
+        scale = _number(scale, lambda m: fail(f"depth_scale: {m}", "depth_scale"))
+        if scale <= 0:
+            raise fail(f"depth_scale must be > 0 (raw units per metre), got {scale:g}", "depth_scale")
+    try:
+        return Camera(width=int(width), height=int(height), depth_scale=scale, **values)
+    except ValueError as exc:
+        raise fail(str(exc)) from None
+
+
+def write_camera_yaml(path: Path, camera: Camera, depth_scale: float | None = None) -> None:
+    """Write ``camera``'s pinhole intrinsics, size, distortion and ``depth_scale`` (omitted when
+    ``None``) so that ``read_camera_yaml`` restores the same values exactly."""
+    lines = [
+        "# pytest-sal camera: pinhole intrinsics (px), OpenCV distortion, depth units per metre",
+        *(f"{key}: {format_float(getattr(camera, key))}" for key in ("fx", "fy", "cx", "cy")),
+        f"width: {int(camera.width)}",
+        f"height: {int(camera.height)}",
+        f"distortion: [{', '.join(format_float(v) for v in camera.distortion)}]",
+    ]
+    if depth_scale is not None:
+        lines.append(f"depth_scale: {format_float(depth_scale)}")
+    atomic_write_text(Path(path), "\n".join(lines) + "\n")
+
+
+def _number(value: Any, fail: Callable[[str], DatasetError]) -> float:
+    """A finite float from a YAML scalar (``1e-05`` loads as text in YAML 1.1, so text is parsed)."""
+    if isinstance(value, bool):
+        raise fail(f"expected a number, got {value!r}")
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise fail(f"expected a number, got {value!r}") from None
+    if not np.isfinite(number):
+        raise fail(f"expected a finite number, got {value!r}")
+    return number
+
+
+# -- camera options ---------------------------------------------------------------------------
+def parse_numbers(value: Any, option: str, counts: Iterable[int]) -> tuple[float, ...]:
+    """Numbers from an option given as a sequence or as text (``"517.3 516.5 318.6 255.3"``,
+    commas allowed); their count must be one of ``counts``."""
+    allowed = tuple(counts)
+    items = value.replace(",", " ").split() if isinstance(value, str) else value
+    try:
+        numbers = tuple(float(v) for v in items)
+    except (TypeError, ValueError):
+        raise DatasetError(f"option {option} must be numbers, got {value!r}") from None
+    if len(numbers) not in allowed or not all(np.isfinite(numbers)):
+        raise DatasetError(f"option {option} needs {' or '.join(map(str, allowed))} finite numbers, got {value!r}")
+    return numbers
+
+
+def select_camera(
+    folder: Path,
+    width: int,
+    height: int,
+    intrinsics: Any,
+    distortion: Any,
+    fallback: Callable[[], Camera],
+) -> Camera:
+    """The camera of a layout, in priority: the ``intrinsics`` option ``(fx, fy, cx, cy)`` (with
+    no distortion unless ``distortion`` is given), ``folder/camera.yaml``, then ``fallback()``
+    (the layout's guess). ``distortion`` alone replaces the distortion of whichever is used."""
+    if intrinsics is not None:
+        fx, fy, cx, cy = parse_numbers(intrinsics, "intrinsics (fx, fy, cx, cy in px)", (4,))
+        try:
+            camera = Camera(fx=fx, fy=fy, cx=cx, cy=cy, width=width, height=height)
+        except ValueError as exc:
+            raise DatasetError(f"option intrinsics: {exc}") from None
+    elif (folder / CAMERA_FILE).is_file():
+        camera = read_camera_yaml(folder / CAMERA_FILE, width, height)
+    else:
+        camera = fallback()
+    if distortion is not None:
+        coeffs = parse_numbers(distortion, "distortion (k1 k2 p1 p2 [k3 ...])", (0, *_DISTORTION_COUNTS))
+        camera = replace(camera, distortion=coeffs)
+    return camera
+
+
+# -- timestamped lists ------------------------------------------------------------------------
+def read_list(path: Path, pattern: str, what: str, increasing: bool = True) -> list[tuple[int, list[float | str]]]:
+    """Rows of a list file as ``(line number, values)``; ``pattern`` gives each column, ``t`` a
+    time (s, float) and ``f`` a file name (``"tf"`` for TUM ``rgb.txt``). With ``increasing``,
+    times in the first column must increase strictly. ``what`` describes a line for messages
+    (``"timestamp filename"``)."""
+    rows: list[tuple[int, list[float | str]]] = []
+    previous: float | None = None
+    for number, fields in read_rows(path):
+        if len(fields) != len(pattern):
+            raise DatasetError(f"expected {len(pattern)} fields '{what}', got {len(fields)}: {' '.join(fields)!r}", path, number)
+        values: list[float | str] = []
+        for kind, field in zip(pattern, fields):
+            if kind == "t":
+                try:
+                    t = float(field)
+                except ValueError:
+                    t = float("nan")
+                if not np.isfinite(t):
+                    raise DatasetError(f"expected a timestamp in seconds, got {field!r}", path, number)
+                values.append(t)
+            else:
+                values.append(field)
+        t0 = float(values[0]) if pattern[0] == "t" else None
+        if increasing and t0 is not None and previous is not None and t0 <= previous:
+            raise DatasetError(f"timestamp {fields[0]} is not after the previous line's {format_float(previous)}", path, number)
+        previous = t0
+        rows.append((number, values))
+    if not rows:
+        raise DatasetError(f"no lines '{what}' found", path)
+    return rows
+
+
+def fps_from_timestamps(timestamps: np.ndarray, default: float) -> float:
+    """``1 / median frame interval`` (Hz), or ``default`` for fewer than two frames."""
+    t = np.asarray(timestamps, dtype=np.float64)
+    if len(t) < 2:
+        return float(default)
+    return 1.0 / float(np.median(np.diff(t)))
+
+
+# -- files ------------------------------------------------------------------------------------
+def natural_key(name: str) -> tuple[Any, ...]:
+    """Sort key putting ``img2.png`` before ``img10.png`` (digit runs compare as numbers)."""
+    parts = re.split(r"(\d+)", name.lower())
+    return tuple(int(p) if i % 2 else p for i, p in enumerate(parts))
+
+
+def frame_file_stem(stem: str, position: int, used: set[str]) -> str:
+    """A file name stem for a written frame: the frame's own stem when it is a plain, unused
+    name, else the zero-padded position (``000042``)."""
+    plain = bool(stem) and re.fullmatch(r"[A-Za-z0-9._+-]+", stem) is not None and not stem.startswith(".")
+    name = stem if plain and stem not in used else f"{position:06d}"
+    while name in used:
+        name += "_"
+    used.add(name)
+    return name
+
+
+def checked_image(frame: Frame, camera: Camera, sequence_name: str) -> np.ndarray:
+    """``frame.image``, after checking that its size is the camera's (what ``camera.yaml`` says)."""
+    image = frame.image
+    if image.shape[:2] != (camera.height, camera.width):
+        raise DatasetError(
+            f"{sequence_name}: frame {frame.index} is {image.shape[1]}x{image.shape[0]} px but the camera is "
+            f"{camera.width}x{camera.height} px"
+        )
+    return image
