@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import os
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import cv2
@@ -74,9 +77,9 @@ def write_depth(path: Path, depth_m: np.ndarray, depth_scale: float | None) -> N
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     if path.suffix == ".npy":
-        tmp = path.with_name(f".{path.name}.tmp.npy")
-        np.save(tmp, np.asarray(depth_m, dtype=np.float32), allow_pickle=False)
-        os.replace(tmp, path)
+        with _staged(path) as tmp:
+            with open(tmp, "wb") as handle:
+                np.save(handle, np.asarray(depth_m, dtype=np.float32), allow_pickle=False)
         return
     if depth_scale is None:
         raise ValueError(f"{path}: a 16-bit depth image needs a depth scale")
@@ -107,6 +110,19 @@ def _imwrite(path: Path, data: np.ndarray) -> None:
     ok, encoded = cv2.imencode(path.suffix or ".png", data)
     if not ok:
         raise ValueError(f"{path}: OpenCV cannot encode this image type")
-    tmp = path.with_name(f".{path.name}.tmp")
-    encoded.tofile(tmp)
-    os.replace(tmp, path)
+    with _staged(path) as tmp:
+        encoded.tofile(tmp)
+
+
+@contextmanager
+def _staged(path: Path) -> Iterator[Path]:
+    """A unique temporary file beside ``path``, moved onto it with ``os.replace`` on success
+    (concurrent writers of the same file never share a temporary)."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.close(fd)
+    try:
+        yield Path(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise

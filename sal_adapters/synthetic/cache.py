@@ -1,0 +1,155 @@
+"""Lazily rendered sequences whose frames are kept on disk, in the synthetic layout.
+
+Opening renders nothing: each frame's image, right image and depth sources load the file
+from the cache folder or render the frame, writing every file that rendering produced
+(left view: image and depth; right view: image). Files are written through uniquely named
+temporary files and ``os.replace``, so processes rendering the same frame at the same time
+only ever see complete files.
+"""
+
+from __future__ import annotations
+
+from functools import partial
+from pathlib import Path
+
+import numpy as np
+
+from sal_adapters.cache_dir import user_cache_dir
+from sal_adapters.errors import DatasetError
+from sal_adapters.images import read_depth, read_image, write_depth, write_image
+from sal_adapters.sequence import FrameRecord, Sequence
+from sal_adapters.synthetic.layout import (
+    DEPTH,
+    LEFT,
+    METADATA,
+    RIGHT,
+    FrameRow,
+    read_metadata,
+    write_metadata,
+)
+from sal_adapters.synthetic.world import World
+
+__all__ = ["RENDERER_VERSION", "default_cache_dir", "frame_stem", "FrameStore", "rendered_sequence"]
+
+#: Bump whenever rendered pixels or depth change: it is part of the cache folder name and
+#: of every rendered sequence's fingerprint.
+RENDERER_VERSION = 1
+
+
+def default_cache_dir(scene: str, seed: int) -> Path:
+    """``<user cache>/synthetic/<scene>-seed<seed>-r<RENDERER_VERSION>``."""
+    return user_cache_dir("synthetic", f"{scene}-seed{seed}-r{RENDERER_VERSION}")
+
+
+def frame_stem(index: int) -> str:
+    """File name stem of frame ``index``: six digits, like KITTI."""
+    return f"{index:06d}"
+
+
+class FrameStore:
+    """Frames of ``world`` in ``folder``: read when present, rendered and stored otherwise."""
+
+    def __init__(self, world: World, folder: Path):
+        self.world = world
+        self.folder = Path(folder)
+
+    def _path(self, stream: str, index: int) -> Path:
+        return self.folder / stream / f"{frame_stem(index)}{'.npy' if stream == DEPTH else '.png'}"
+
+    def left(self, index: int) -> np.ndarray:
+        """Left RGB image of frame ``index``."""
+        path = self._path(LEFT, index)
+        return read_image(path) if path.is_file() else self._render_left(index)[0]
+
+    def depth(self, index: int) -> np.ndarray:
+        """Left z-depth (float32 m, 0 = sky) of frame ``index``."""
+        path = self._path(DEPTH, index)
+        return read_depth(path, None) if path.is_file() else self._render_left(index)[1]
+
+    def right(self, index: int) -> np.ndarray:
+        """Right RGB image of frame ``index``."""
+        path = self._path(RIGHT, index)
+        if path.is_file():
+            return read_image(path)
+        rgb, _ = self.world.render(index, right=True)
+        write_image(path, rgb)
+        return rgb
+
+    def _render_left(self, index: int) -> tuple[np.ndarray, np.ndarray]:
+        """Render the left view and store both of its files."""
+        rgb, depth = self.world.render(index)
+        write_image(self._path(LEFT, index), rgb)
+        write_depth(self._path(DEPTH, index), depth, None)
+        return rgb, depth
+
+
+def rendered_sequence(world: World, folder: Path, frames: int, sensor: str) -> Sequence:
+    """The first ``frames`` frames of ``world`` as ``sensor``, rendered on demand into ``folder``.
+
+    The folder's metadata (a synthetic layout with ``cache: true``) is written or extended
+    to at least ``frames`` frames; a folder holding another world raises ``DatasetError``.
+    """
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise DatasetError("synthetic cache_dir is not a folder", folder)
+    groundtruth = world.groundtruth(np.arange(frames))
+    if _cached_frames(world, folder) < frames:
+        folder.mkdir(parents=True, exist_ok=True)
+        info = {
+            "kind": "synthetic",
+            "name": _name(world),
+            "scene": world.name,
+            "seed": world.seed,
+            "renderer_version": RENDERER_VERSION,
+            "sensor": world.default_sensor,
+            "fps": world.fps,
+            "camera": world.camera(world.default_sensor).to_dict(),
+            "grayscale": False,
+            "frames": frames,
+            "cache": True,
+        }
+        rows = [FrameRow(frame_stem(i), i, i / world.fps) for i in range(frames)]
+        write_metadata(folder, info, rows, groundtruth)
+    store = FrameStore(world, folder)
+    records = [
+        FrameRecord(
+            index=i,
+            timestamp=i / world.fps,
+            stem=frame_stem(i),
+            image=partial(store.left, i),
+            right=partial(store.right, i) if sensor == "stereo" else None,
+            depth=partial(store.depth, i) if sensor == "rgbd" else None,
+        )
+        for i in range(frames)
+    ]
+    return Sequence(
+        kind="synthetic",
+        name=_name(world),
+        camera=world.camera(sensor),
+        sensor=sensor,  # type: ignore[arg-type]
+        fps=world.fps,
+        records=records,
+        groundtruth=groundtruth,
+        source=folder,
+        meta={"scene": world.name, "seed": world.seed, "renderer_version": RENDERER_VERSION},
+        content_key=f"synthetic:{world.name}:seed={world.seed}:sensor={sensor}:renderer={RENDERER_VERSION}",
+    )
+
+
+def _name(world: World) -> str:
+    return f"synthetic/{world.name}-seed{world.seed}"
+
+
+def _cached_frames(world: World, folder: Path) -> int:
+    """Frames listed in the cache folder's metadata (0 when there is none yet)."""
+    if not (folder / METADATA).is_file():
+        return 0
+    info = read_metadata(folder)
+    found = (info.get("scene"), info.get("seed"), info.get("renderer_version"), info.get("cache"))
+    if found != (world.name, world.seed, RENDERER_VERSION, True):
+        raise DatasetError(
+            f"folder holds synthetic frames of scene={found[0]!r} seed={found[1]!r} renderer_version={found[2]!r} cache={found[3]!r}, "
+            f"not of scene={world.name!r} seed={world.seed} renderer_version={RENDERER_VERSION}; use another cache_dir",
+            folder / METADATA,
+        )
+    return int(info["frames"])

@@ -1,0 +1,431 @@
+"""The synthetic world: camera and motion, exact depth, stereo, texture, caching and layout."""
+
+from __future__ import annotations
+
+import json
+import threading
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from sal_adapters import (
+    Camera,
+    DatasetError,
+    FrameRecord,
+    Sequence,
+    Trajectory,
+    open_dataset,
+    write_sequence,
+)
+from sal_adapters.synthetic import RENDERER_VERSION, WORLDS
+from sal_adapters.synthetic.cache import FrameStore
+from sal_adapters.synthetic.geometry import BoxBuilder
+from sal_adapters.synthetic.render import Renderer, Stage
+from sal_adapters.synthetic.world import World
+
+SCENES = ("urban", "indoor")
+#: fx, fy, cx, cy, width, height, fps, baseline (m), depth scale
+SPEC = {
+    "urban": (718.856, 718.856, 607.1928, 185.2157, 1240, 376, 10.0, 0.54, None),
+    "indoor": (525.0, 525.0, 319.5, 239.5, 640, 480, 30.0, 0.1, 5000.0),
+}
+
+
+def grey(rgb: np.ndarray) -> np.ndarray:
+    return cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY).astype(np.float64)
+
+
+def bilinear(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Bilinear samples of a 2-D array at float coordinates (inside the image)."""
+    x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
+    fx, fy = x - x0, y - y0
+    img = image.astype(np.float64)
+    return (
+        img[y0, x0] * (1 - fx) * (1 - fy)
+        + img[y0, x0 + 1] * fx * (1 - fy)
+        + img[y0 + 1, x0] * (1 - fx) * fy
+        + img[y0 + 1, x0 + 1] * fx * fy
+    )
+
+
+def rgbd(scene: str, frames: int, **options) -> Sequence:
+    return open_dataset("synthetic", scene=scene, frames=frames, sensor="rgbd", **options)
+
+
+# -- camera, sensors, motion ---------------------------------------------------------------------
+@pytest.mark.parametrize("scene", SCENES)
+@pytest.mark.parametrize("sensor", ["mono", "stereo", "rgbd"])
+def test_camera_rate_size_and_streams_per_sensor(scene: str, sensor: str) -> None:
+    fx, fy, cx, cy, width, height, fps, baseline, depth_scale = SPEC[scene]
+    seq = open_dataset("synthetic", scene=scene, frames=3, sensor=sensor)
+    cam = seq.camera
+    assert (cam.fx, cam.fy, cam.cx, cam.cy, cam.width, cam.height) == (fx, fy, cx, cy, width, height)
+    assert cam.depth_scale == depth_scale and seq.fps == fps and seq.sensor == sensor
+    np.testing.assert_array_equal(seq.timestamps, np.arange(3) / fps)
+    frame = seq[1]
+    assert frame.image.shape == (height, width, 3) and frame.image.dtype == np.uint8
+    if sensor == "stereo":
+        assert cam.baseline_m == pytest.approx(baseline)
+        np.testing.assert_allclose(cam.T_lr, [[1, 0, 0, baseline], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]])
+        assert frame.right.shape == (height, width, 3) and frame.depth is None
+    else:
+        assert cam.baseline_m is None and frame.right is None
+    if sensor == "rgbd":
+        assert frame.depth.shape == (height, width) and frame.depth.dtype == np.float32
+    else:
+        assert frame.depth is None
+
+
+def test_default_sensor_is_stereo_outdoors_and_rgbd_indoors() -> None:
+    assert open_dataset("synthetic", scene="urban", frames=2).sensor == "stereo"
+    assert open_dataset("synthetic", scene="indoor", frames=2).sensor == "rgbd"
+
+
+def test_urban_camera_drives_forward_at_10_m_per_s_1_65_m_above_the_road() -> None:
+    seq = rgbd("urban", 21)
+    steps = np.linalg.norm(np.diff(seq.groundtruth.positions, axis=0), axis=1) * seq.fps
+    assert np.all((steps > 9.0) & (steps < 11.0)) and np.mean(steps) == pytest.approx(10.0, abs=0.3)
+    travel = seq.groundtruth.positions[-1]
+    assert travel[2] / np.linalg.norm(travel) > 0.998  # straight ahead, along the first camera's z
+    # Road points at the bottom centre: Y (camera frame, down) is the camera height.
+    depth = seq[0].depth
+    v = np.arange(340, 372)[:, None]
+    height = (v - seq.camera.cy) / seq.camera.fy * depth[340:372, 560:680]
+    assert np.median(height) == pytest.approx(1.65, abs=0.05)
+
+
+def test_indoor_camera_is_hand_held_speed() -> None:
+    gt = open_dataset("synthetic", scene="indoor", frames=301).groundtruth  # 10 s, nothing rendered
+    speed = np.linalg.norm(np.diff(gt.positions, axis=0), axis=1) * 30.0
+    assert 0.3 < speed.mean() < 0.6 and speed.max() < 1.2
+    relative = np.linalg.inv(gt.matrices[:-1]) @ gt.matrices[1:]
+    angles = np.degrees(np.arccos(np.clip((np.trace(relative[:, :3, :3], axis1=1, axis2=2) - 1) / 2, -1, 1)))
+    assert angles.max() < 1.0 and angles.sum() > 2.0
+
+
+# -- determinism ------------------------------------------------------------------------------------
+@pytest.mark.parametrize("scene", SCENES)
+def test_same_seed_renders_bit_identical_frames(scene: str) -> None:
+    first, second = WORLDS[scene](3), WORLDS[scene](3)  # fresh worlds: atlas painted twice
+    (rgb1, depth1), (rgb2, depth2) = first.render(4), second.render(4)
+    assert np.array_equal(rgb1, rgb2) and np.array_equal(depth1, depth2)
+    assert first.groundtruth(np.arange(5)).allclose(second.groundtruth(np.arange(5)), atol=0.0)
+
+
+@pytest.mark.parametrize("scene", SCENES)
+def test_other_seed_gives_other_world_and_path(scene: str) -> None:
+    a, b = rgbd(scene, 11, seed=0), rgbd(scene, 11, seed=1)
+    assert np.abs(grey(a[0].image) - grey(b[0].image)).mean() > 15
+    assert not np.array_equal(WORLDS[scene](0).atlas.image, WORLDS[scene](1).atlas.image)
+    assert np.abs(a.groundtruth.positions[10] - b.groundtruth.positions[10]).max() > 0.01
+
+
+def test_frame_does_not_depend_on_the_number_of_frames(tmp_path: Path) -> None:
+    short = open_dataset("synthetic", scene="indoor", frames=3, cache_dir=tmp_path / "a")
+    long = open_dataset("synthetic", scene="indoor", frames=20, cache_dir=tmp_path / "b")
+    assert np.array_equal(short[2].image, long[2].image) and np.array_equal(short[2].depth, long[2].depth)
+    assert short.groundtruth.allclose(long.groundtruth.select([0, 1, 2]), atol=0.0)
+
+
+# -- physics: depth, stereo, texture ----------------------------------------------------------------
+def reprojection(seq: Sequence, i: int, j: int, poses: np.ndarray, max_depth: float = 60.0) -> tuple[np.ndarray, np.ndarray]:
+    """Relative depth error and grey-value difference of frame i's pixels moved into frame j."""
+    K, fi, fj = seq.camera.K, seq[i], seq[j]
+    height, width = fi.depth.shape
+    v, u = np.mgrid[3 : height - 3 : 5, 3 : width - 3 : 5]
+    z = fi.depth[v, u].astype(np.float64)
+    keep = (z > 0) & (z < max_depth)
+    u, v, z = u[keep], v[keep], z[keep]
+    points = np.linalg.inv(K) @ np.stack([u, v, np.ones_like(u)]) * z
+    T = np.linalg.inv(poses[j]) @ poses[i]
+    moved = T[:3, :3] @ points + T[:3, 3:]
+    uj, vj = (K @ moved)[:2] / moved[2]
+    inside = (moved[2] > 0.1) & (uj > 1) & (uj < width - 2) & (vj > 1) & (vj < height - 2)
+    inverse = np.divide(1.0, fj.depth, out=np.zeros_like(fj.depth), where=fj.depth > 0)
+    sampled = bilinear(inverse, uj[inside], vj[inside])
+    predicted = moved[2][inside]
+    error = np.abs(1.0 / np.maximum(sampled, 1e-9) - predicted) / predicted
+    photometric = np.abs(grey(fi.image)[v[inside], u[inside]] - bilinear(grey(fj.image), uj[inside], vj[inside]))
+    return error, photometric
+
+
+@pytest.mark.parametrize(("scene", "i", "j"), [("urban", 0, 2), ("urban", 6, 4), ("indoor", 0, 12), ("indoor", 20, 9)])
+def test_depth_and_poses_agree_between_frames(scene: str, i: int, j: int) -> None:
+    """Back-project frame i with its depth and ground-truth pose, project into frame j: the
+    depth there is the moved point's z (1 %) and the colour matches."""
+    seq = rgbd(scene, 21)
+    error, photometric = reprojection(seq, i, j, seq.groundtruth.matrices)
+    assert len(error) > 2000
+    good = error < 0.01
+    assert good.mean() > 0.9  # the rest: occlusions and depth edges
+    assert np.median(photometric[good]) < 3.0 and np.percentile(photometric[good], 75) < 8.0
+    wrong = seq.groundtruth.matrices.copy()
+    wrong[j] = seq.groundtruth.matrices[j + 5 if j + 5 < len(seq) else j - 5]
+    assert (reprojection(seq, i, j, wrong)[0] < 0.01).mean() < 0.5  # the check can fail
+
+
+@pytest.mark.parametrize("scene", SCENES)
+def test_right_image_is_left_image_shifted_by_disparity(scene: str) -> None:
+    """Left pixel (u, v) at depth Z appears in the right image at u - fx * b / Z."""
+    stereo = open_dataset("synthetic", scene=scene, frames=3, sensor="stereo")
+    depth = rgbd(scene, 3)[1].depth
+    left, right = grey(stereo[1].image), grey(stereo[1].right)
+    v, u = np.mgrid[2 : depth.shape[0] - 2 : 3, 2 : depth.shape[1] - 2 : 3]
+    z = depth[v, u]
+    u_right = u - stereo.camera.fx * stereo.camera.baseline_m / np.where(z > 0, z, np.inf)
+    keep = (z > 0) & (u_right > 1)
+    target = left[v[keep], u[keep]]
+    at_disparity = np.abs(target - bilinear(right, u_right[keep], v[keep].astype(float)))
+    at_zero = np.abs(target - right[v[keep], u[keep]])
+    assert np.median(at_disparity) < 1.5 and np.mean(at_disparity < 8) > 0.9
+    assert np.mean(at_zero) > 3 * np.mean(at_disparity)
+
+
+@pytest.mark.parametrize("scene", SCENES)
+def test_orb_finds_features_everywhere_but_in_the_sky(scene: str) -> None:
+    """8 x 6 grid: ORB (2000 features) hits >= 85 % of the cells without sky (>= 80 % in every
+    frame) and no cell that is all sky; no feature lies in the sky away from structure."""
+    seq = rgbd(scene, 31)
+    coverage = []
+    for frame in (seq[0], seq[15], seq[30]):
+        keypoints = cv2.ORB_create(2000).detect(cv2.cvtColor(frame.image, cv2.COLOR_RGB2GRAY), None)
+        xy = np.array([k.pt for k in keypoints])
+        height, width = frame.depth.shape
+        rows, cols = (xy[:, 1] * 6 // height).astype(int), (xy[:, 0] * 8 // width).astype(int)
+        counts = np.zeros((6, 8), int)
+        np.add.at(counts, (rows, cols), 1)
+        sky = frame.depth == 0
+        cells = [[sky[r * height // 6 : (r + 1) * height // 6, c * width // 8 : (c + 1) * width // 8] for c in range(8)] for r in range(6)]
+        sky_share = np.array([[cell.mean() for cell in row] for row in cells])
+        assert counts[sky_share == 1.0].sum() == 0
+        structure = cv2.dilate((~sky).astype(np.uint8), np.ones((9, 9), np.uint8)).astype(bool)
+        assert structure[xy[:, 1].astype(int), xy[:, 0].astype(int)].all()
+        coverage.append((counts[sky_share < 0.1] > 0).mean())
+    assert min(coverage) >= 0.8 and np.mean(coverage) >= 0.85, coverage
+    if scene == "urban":
+        assert (seq[0].depth == 0).mean() > 0.03  # there is a sky
+    else:
+        assert (seq[0].depth > 0).all()  # a closed room
+
+
+def test_sky_is_a_smooth_gradient_without_depth() -> None:
+    frame = rgbd("urban", 1)[0]
+    sky = cv2.erode((frame.depth == 0).astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+    image = grey(frame.image)
+    gradient = np.abs(cv2.Sobel(image, cv2.CV_64F, 1, 0)) + np.abs(cv2.Sobel(image, cv2.CV_64F, 0, 1))
+    assert sky.sum() > 5000 and gradient[sky].max() <= 16  # 8-bit steps of a smooth ramp
+    top, bottom = image[sky].reshape(-1)[:100].mean(), image[sky].reshape(-1)[-100:].mean()
+    assert bottom > top  # paler towards the horizon
+
+
+def test_atlas_levels_are_box_filtered_and_gutters_wrap() -> None:
+    atlas = WORLDS["indoor"](0).atlas
+    base = atlas.tile("poster0").astype(np.float64)
+    half = base.reshape(128, 2, 128, 2, 3).mean(axis=(1, 3))
+    assert np.abs(atlas.tile("poster0", 1) - half).max() <= 1.0
+    x0, y0 = (int(v) for v in atlas.origin[atlas.index("poster0")])
+    np.testing.assert_array_equal(atlas.image[y0 - 1, x0 : x0 + 256], atlas.image[y0 + 255, x0 : x0 + 256])
+    np.testing.assert_array_equal(atlas.image[y0 : y0 + 256, x0 + 256], atlas.image[y0 : y0 + 256, x0])
+
+
+def test_renderer_depth_of_planes_is_exact() -> None:
+    """A wall 3 m ahead and a floor 1.5 m below a level camera: Z = 3 and Z = fy * 1.5 / (v - cy)."""
+    world = WORLDS["indoor"](0)
+    b = BoxBuilder()
+    b.add((-1.0, -1.0, 3.0), (1.0, 0.5, 3.5), {"-z": (0, 128, 128)})
+    b.add((-20.0, 1.5, 0.5), (20.0, 1.6, 60.0), {"-y": (1, 128, 128)})
+    renderer = Renderer(world.camera("mono"), world.atlas)
+    _, depth = renderer.render(Stage(groups=(b.build(),)), np.eye(4))
+    cam = world.camera("mono")
+    wall = np.zeros(depth.shape, bool)
+    u0, u1 = cam.cx - cam.fx / 3.0, cam.cx + cam.fx / 3.0
+    v0, v1 = cam.cy - cam.fy / 3.0, cam.cy + cam.fy * 0.5 / 3.0
+    wall[int(np.ceil(v0)) : int(np.floor(v1)) + 1, int(np.ceil(u0)) : int(np.floor(u1)) + 1] = True
+    np.testing.assert_allclose(depth[wall], 3.0, rtol=1e-5)
+    drawn = np.abs(depth - 3.0) < 1e-4
+    assert (drawn & ~wall).sum() <= 2 * (wall.shape[0] + wall.shape[1])  # half-pixel silhouette
+    rows = np.arange(int(v1) + 2, depth.shape[0])
+    expected = cam.fy * 1.5 / (rows - cam.cy)
+    np.testing.assert_allclose(depth[rows, 20], expected, rtol=1e-5)
+
+
+def test_renderer_matches_brute_force_ray_casting_of_boxes() -> None:
+    """Painter's order and analytic depth agree with per-pixel ray/box intersection."""
+    world = WORLDS["indoor"](0)
+    rng = np.random.default_rng(5)
+    b = BoxBuilder()
+    lows, highs = [], []
+    for gx in range(4):
+        for gz in range(3):
+            lo = np.array([gx * 1.5 - 3.0, rng.uniform(-1.5, 0.5), 2.0 + gz * 1.5]) + rng.uniform(0, 0.3, 3)
+            hi = lo + rng.uniform(0.3, 1.1, 3)
+            b.add(lo, hi, {name: (int(rng.integers(5)), 128, 128) for name in ("-x", "+x", "-y", "+y", "-z", "+z")})
+            lows.append(lo)
+            highs.append(hi)
+    cam = world.camera("mono")
+    pose = np.eye(4)
+    pose[:3, 3] = (0.2, -0.4, -0.5)
+    _, depth = Renderer(cam, world.atlas).render(Stage(groups=(b.build(),)), pose)
+    v, u = np.mgrid[0 : cam.height : 4, 0 : cam.width : 4]
+    rays = np.stack([(u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy, np.ones(u.shape)], axis=-1)
+    best = np.full(u.shape, np.inf)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for lo, hi in zip(lows, highs):
+            t0, t1 = (lo - pose[:3, 3]) / rays, (hi - pose[:3, 3]) / rays
+            near, far = np.minimum(t0, t1).max(axis=-1), np.maximum(t0, t1).min(axis=-1)
+            hit = (near <= far) & (near > 0)
+            best = np.where(hit & (near < best), near, best)
+    expected = np.where(np.isfinite(best), best, 0.0)
+    agree = np.abs(depth[v, u] - expected) <= 1e-4 * np.maximum(expected, 1.0)
+    assert (expected > 0).mean() > 0.2 and agree.mean() > 0.98
+
+
+# -- lazy rendering and the cache -------------------------------------------------------------------
+def test_open_renders_nothing_and_access_renders_one_frame(tmp_path: Path) -> None:
+    seq = open_dataset("synthetic", scene="indoor", frames=5, cache_dir=tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["groundtruth.txt", "sequence.json", "times.txt"]
+    assert seq.source == tmp_path and seq.fingerprint  # fingerprint needs no frame file
+    assert seq[1].image.shape == (480, 640, 3)
+    files = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*") if p.is_file())
+    assert files == ["depth/000001.npy", "groundtruth.txt", "image_left/000001.png", "sequence.json", "times.txt"]
+
+
+def test_cached_frames_are_read_back_not_rendered_again(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    seq = open_dataset("synthetic", scene="urban", frames=4, sensor="stereo", cache_dir=tmp_path)
+    calls: list[tuple[int, bool]] = []
+    render = World.render
+
+    def counting(self: World, index: int, right: bool = False):
+        calls.append((index, right))
+        return render(self, index, right)
+
+    monkeypatch.setattr(World, "render", counting)
+    first, first_right = seq[2].image, seq[2].right
+    assert calls == [(2, False), (2, True)] and (tmp_path / "image_right" / "000002.png").is_file()
+    again = open_dataset("synthetic", scene="urban", frames=4, sensor="rgbd", cache_dir=tmp_path)[2]
+    assert np.array_equal(again.image, first) and again.depth is not None
+    assert np.array_equal(seq[2].right, first_right)
+    assert calls == [(2, False), (2, True)]
+
+
+def test_concurrent_renders_of_one_frame_are_harmless(tmp_path: Path) -> None:
+    store = FrameStore(WORLDS["indoor"](0), tmp_path)
+    results: list[np.ndarray] = []
+    threads = [threading.Thread(target=lambda: results.append(store.left(3))) for _ in range(4)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert len(results) == 4 and all(np.array_equal(r, results[0]) for r in results)
+    assert np.array_equal(store.left(3), results[0])
+    assert not [p for p in tmp_path.rglob(".*")]  # no temporary file left behind
+
+
+def test_render_cache_folder_opens_as_a_dataset(tmp_path: Path) -> None:
+    seq = open_dataset("synthetic", scene="indoor", frames=4, seed=2, cache_dir=tmp_path)
+    image = seq[3].image
+    again = open_dataset("synthetic", tmp_path)
+    assert len(again) == 4 and again.sensor == "rgbd" and again.meta == seq.meta
+    assert np.array_equal(again[3].image, image) and again.groundtruth.allclose(seq.groundtruth, atol=0.0)
+    assert again.content_key == seq.content_key and again.fingerprint == seq.fingerprint
+    open_dataset("synthetic", scene="indoor", frames=6, seed=2, cache_dir=tmp_path)
+    assert len(open_dataset("synthetic", tmp_path, sensor="mono")) == 6
+    info = json.loads((tmp_path / "sequence.json").read_text())
+    assert (info["scene"], info["seed"], info["renderer_version"], info["cache"]) == ("indoor", 2, RENDERER_VERSION, True)
+    (tmp_path / "sequence.json").write_text(json.dumps({**info, "renderer_version": RENDERER_VERSION - 1}))
+    with pytest.raises(DatasetError, match="renderer version"):
+        open_dataset("synthetic", tmp_path)  # frames of an older look are not mixed with new ones
+
+
+def test_cache_folder_of_another_world_is_refused(tmp_path: Path) -> None:
+    open_dataset("synthetic", scene="indoor", frames=2, seed=1, cache_dir=tmp_path)
+    with pytest.raises(DatasetError, match="seed=1"):
+        open_dataset("synthetic", scene="indoor", frames=2, seed=2, cache_dir=tmp_path)
+
+
+def test_writing_into_the_render_cache_is_refused() -> None:
+    seq = open_dataset("synthetic", scene="indoor", frames=2)
+    with pytest.raises(DatasetError, match="source"):
+        write_sequence(seq, seq.source / "copy")
+
+
+# -- the layout: write and read back ----------------------------------------------------------------
+def assert_same(copy: Sequence, original: Sequence) -> None:
+    assert copy.kind == "synthetic" and len(copy) == len(original)
+    assert (copy.sensor, copy.fps, copy.camera) == (original.sensor, original.fps, original.camera)
+    assert [r.stem for r in copy.records] == [r.stem for r in original.records]
+    assert np.array_equal(copy.indices, original.indices) and np.array_equal(copy.timestamps, original.timestamps)
+    assert copy.groundtruth.allclose(original.groundtruth, atol=1e-12)
+    for a, b in zip(copy, original):
+        assert np.array_equal(a.image, b.image)
+        assert (a.right is None) == (b.right is None) and (a.right is None or np.array_equal(a.right, b.right))
+        assert (a.depth is None) == (b.depth is None) and (a.depth is None or np.array_equal(a.depth, b.depth))
+
+
+@pytest.mark.parametrize("sensor", ["mono", "stereo", "rgbd"])
+def test_round_trip_of_every_sensor(tmp_path: Path, sensor: str) -> None:
+    seq = open_dataset("synthetic", scene="indoor", frames=3, sensor=sensor)
+    copy = open_dataset("synthetic", write_sequence(seq, tmp_path / "copy"))
+    assert_same(copy, seq)
+    assert copy.meta == seq.meta and copy.name == seq.name
+    assert (tmp_path / "copy" / "image_right").is_dir() == (sensor == "stereo")
+    assert (tmp_path / "copy" / "depth").is_dir() == (sensor == "rgbd")
+
+
+def test_round_trip_keeps_dropped_frames_and_their_indices(tmp_path: Path) -> None:
+    seq = open_dataset("synthetic", scene="urban", frames=6).select([0, 2, 5])
+    copy = open_dataset("synthetic", write_sequence(seq, tmp_path / "copy"))
+    assert_same(copy, seq)
+    assert list(copy.indices) == [0, 2, 5] and [r.stem for r in copy.records] == ["000000", "000002", "000005"]
+
+
+def test_round_trip_of_a_foreign_sequence(tmp_path: Path) -> None:
+    """Any sequence: odd stems, integer ns times, ground truth at another rate, mixed streams."""
+    rng = np.random.default_rng(0)
+    images = [rng.integers(0, 256, (8, 10, 3), dtype=np.uint8) for _ in range(3)]
+    depths = [rng.uniform(0.5, 4, (8, 10)).astype(np.float32), None, rng.uniform(0.5, 4, (8, 10)).astype(np.float32)]
+    records = [
+        FrameRecord(index=10 + 3 * k, timestamp=1403715274.1 + 0.05 * k, stem=f"cam-{k}", image=lambda k=k: images[k],
+                    depth=None if depths[k] is None else (lambda k=k: depths[k]), timestamp_ns=1403715274100000000 + 50000000 * k)
+        for k in range(3)
+    ]
+    t = np.linspace(1403715274.0, 1403715274.3, 31)
+    gt = Trajectory(t, np.c_[t - t[0], np.zeros(31), np.zeros(31)], np.tile([0, 0, 0, 1.0], (31, 1)))
+    seq = Sequence(kind="custom", name="custom/x", camera=Camera(20.0, 20.0, 5.0, 4.0, 10, 8), sensor="mono", fps=20.0, records=records, groundtruth=gt)
+    copy = open_dataset("synthetic", write_sequence(seq, tmp_path / "copy", layout="synthetic"))
+    assert_same(copy, seq)
+    assert [r.timestamp_ns for r in copy.records] == [r.timestamp_ns for r in records]
+
+
+@pytest.mark.parametrize(
+    ("option", "value"),
+    [("scene", "mars"), ("frames", 0), ("frames", -3), ("frames", 2.5), ("frames", "many"), ("seed", -1), ("seed", True), ("sensor", "lidar")],
+)
+def test_bad_option_values_name_the_option(option: str, value: object) -> None:
+    with pytest.raises(DatasetError) as error:
+        open_dataset("synthetic", **{option: value})
+    assert option in str(error.value) and repr(value) in str(error.value)
+    assert "use" in str(error.value)
+
+
+def test_malformed_folders_name_the_file(tmp_path: Path) -> None:
+    seq = open_dataset("synthetic", scene="indoor", frames=3, sensor="mono")
+    folder = write_sequence(seq, tmp_path / "copy")
+    with pytest.raises(DatasetError, match=r"image_right.000000\.png"):
+        open_dataset("synthetic", folder, sensor="stereo")
+    times = folder / "times.txt"
+    lines = times.read_text().splitlines()
+    times.write_text("\n".join([*lines[:2], "000001 one 0.1", *lines[3:]]) + "\n")
+    with pytest.raises(DatasetError, match=r"times\.txt:3"):
+        open_dataset("synthetic", folder)
+    times.write_text("\n".join(lines) + "\n")
+    (folder / "image_left" / "000002.png").unlink()
+    with pytest.raises(DatasetError, match=r"image_left.000002\.png"):
+        open_dataset("synthetic", folder)
+    (folder / "sequence.json").write_text("{not json")
+    with pytest.raises(DatasetError, match=r"sequence\.json"):
+        open_dataset("synthetic", folder)
+    with pytest.raises(DatasetError, match=r"sequence\.json not found"):
+        open_dataset("synthetic", tmp_path)
