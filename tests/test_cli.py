@@ -80,3 +80,23 @@ def test_malformed_file_error_names_file_and_line(shared_data, tmp_path):
 def test_usage_errors_come_from_argparse():
     result = run_sal("dataset", "info", "kitti", "/tmp", "--max-frames", "0")
     assert result.returncode == 2 and "expected a number >= 1, got 0" in result.stderr
+
+
+def test_demo_renders_both_scenes_and_writes_previews(tmp_path, capsys):
+    import cv2
+
+    assert main(["demo", "--frames", "3", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "3 stereo frames 1240x376 px at 10 Hz" in out and "baseline 0.54 m" in out
+    assert "3 rgbd frames 640x480 px at 30 Hz" in out
+    for scene in ("urban", "indoor"):
+        sheet = cv2.imread(str(tmp_path / f"{scene}.png"))
+        assert sheet is not None and sheet.shape[0] > 300
+        assert sheet.std() > 20  # frames and depth, not a blank canvas
+
+
+def test_dataset_info_synthetic_without_path(capsys):
+    assert main(["dataset", "info", "synthetic", "-o", "scene=indoor", "-o", "frames=12", "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["frames"] == 12 and info["sensor"] == "rgbd" and info["fps"] == 30
+    assert info["camera"]["width"] == 640 and info["groundtruth_poses"] == 12
