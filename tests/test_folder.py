@@ -9,6 +9,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from sequence_asserts import assert_same_frames
 
 from sal_adapters import (
     Camera,
@@ -39,14 +40,6 @@ def make_folder(root: Path, names: list[str], shape: tuple[int, ...] = (6, 8, 3)
         write_png(root / name, rng.integers(0, 256, shape, dtype=np.uint8))
     (root / "camera.yaml").write_text("fx: 8\nfy: 8\ncx: 3.5\ncy: 2.5\n")
     return root
-
-
-def assert_same_frames(a: Sequence, b: Sequence) -> None:
-    assert len(a) == len(b)
-    assert np.array_equal(a.timestamps, b.timestamps)
-    assert [r.stem for r in a.records] == [r.stem for r in b.records]
-    for fa, fb in zip(a, b):
-        assert np.array_equal(fa.image, fb.image)
 
 
 @pytest.fixture

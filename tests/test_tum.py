@@ -9,6 +9,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from sequence_asserts import assert_same_frames
 
 from sal_adapters import (
     Camera,
@@ -81,17 +82,6 @@ def make_tum(
     (folder / "depth.txt").write_text("\n".join(depth_lines) + "\n")
     (folder / "groundtruth.txt").write_text("\n".join(gt_lines) + "\n")
     return folder
-
-
-def assert_same_frames(a: Sequence, b: Sequence) -> None:
-    assert len(a) == len(b)
-    assert np.array_equal(a.timestamps, b.timestamps)
-    assert [r.stem for r in a.records] == [r.stem for r in b.records]
-    for fa, fb in zip(a, b):
-        assert np.array_equal(fa.image, fb.image)
-        if a.sensor == "rgbd":
-            assert fa.depth.dtype == fb.depth.dtype == np.float32
-            assert np.array_equal(fa.depth, fb.depth)
 
 
 @pytest.fixture
