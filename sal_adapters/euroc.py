@@ -26,7 +26,7 @@ from sal_adapters.datasets import DatasetKind
 from sal_adapters.errors import DatasetError, DatasetWarning
 from sal_adapters.images import probe_image, write_image
 from sal_adapters.sequence import Frame, FrameRecord, Sequence
-from sal_adapters.textfiles import atomic_write_text, read_rows
+from sal_adapters.textfiles import atomic_write_text, read_rows, read_text
 from sal_adapters.trajectory import Trajectory, seconds_to_ns
 
 __all__ = ["EUROC", "EurocDataset", "CameraSensor", "FrameRow", "read_camera_sensor", "read_sensor_yaml", "read_frame_csv"]
@@ -201,12 +201,7 @@ class EurocDataset(DatasetKind):
 def read_sensor_yaml(path: Path) -> dict[str, Any]:
     """Parse a EuRoC ``sensor.yaml`` (the OpenCV ``%YAML:1.0`` directive is dropped)."""
     path = Path(path)
-    if not path.is_file():
-        raise DatasetError("sensor file not found", path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DatasetError(f"cannot read text file ({exc})", path) from None
+    text = read_text(path, what="sensor file")
     text = re.sub(r"\A%YAML[: ]\s*1\.\d+[^\n]*", "", text)  # keeps the line numbers
     try:
         data = yaml.safe_load(text)

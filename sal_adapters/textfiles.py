@@ -11,7 +11,18 @@ import numpy as np
 
 from sal_adapters.errors import DatasetError
 
-__all__ = ["read_rows", "read_numeric_table", "atomic_write_text", "format_float"]
+__all__ = ["read_text", "read_rows", "read_numeric_table", "atomic_write_text", "format_float"]
+
+
+def read_text(path: Path, what: str = "file") -> str:
+    """UTF-8 content of a text file; ``DatasetError`` naming it when missing or unreadable."""
+    path = Path(path)
+    if not path.is_file():
+        raise DatasetError(f"{what} not found", path)
+    try:
+        return path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DatasetError(f"cannot read text file ({exc})", path) from None
 
 
 def read_rows(path: Path, delimiter: str | None = None) -> list[tuple[int, list[str]]]:
@@ -19,13 +30,7 @@ def read_rows(path: Path, delimiter: str | None = None) -> list[tuple[int, list[
 
     ``delimiter=None`` splits on whitespace; ``","`` splits CSV fields and strips them.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise DatasetError("file not found", path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DatasetError(f"cannot read text file ({exc})", path) from None
+    text = read_text(path)
     rows = []
     for number, line in enumerate(text.splitlines(), start=1):
         stripped = line.strip()
