@@ -69,13 +69,11 @@ def test_camera_rate_size_and_streams_per_sensor(scene: str, sensor: str) -> Non
     if sensor == "stereo":
         assert cam.baseline_m == pytest.approx(baseline)
         np.testing.assert_allclose(cam.T_lr, [[1, 0, 0, baseline], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]])
-        assert frame.right.shape == (height, width, 3) and frame.depth is None
+        assert frame.right.shape == (height, width, 3)
     else:
         assert cam.baseline_m is None and frame.right is None
-    if sensor == "rgbd":
-        assert frame.depth.shape == (height, width) and frame.depth.dtype == np.float32
-    else:
-        assert frame.depth is None
+    # ground-truth depth comes with every sensor (depth-aware perturbations use it)
+    assert frame.depth.shape == (height, width) and frame.depth.dtype == np.float32
 
 
 def test_default_sensor_is_stereo_outdoors_and_rgbd_indoors() -> None:
@@ -371,7 +369,7 @@ def test_round_trip_of_every_sensor(tmp_path: Path, sensor: str) -> None:
     assert_same(copy, seq)
     assert copy.meta == seq.meta and copy.name == seq.name
     assert (tmp_path / "copy" / "image_right").is_dir() == (sensor == "stereo")
-    assert (tmp_path / "copy" / "depth").is_dir() == (sensor == "rgbd")
+    assert (tmp_path / "copy" / "depth").is_dir()
 
 
 def test_round_trip_keeps_dropped_frames_and_their_indices(tmp_path: Path) -> None:

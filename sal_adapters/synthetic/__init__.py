@@ -6,6 +6,7 @@
 Scenes: ``urban`` (KITTI-like street, 1240x376 px, 10 Hz, stereo baseline 0.54 m) and
 ``indoor`` (TUM-like room, 640x480 px, 30 Hz, baseline 0.1 m, depth scale 5000). Frames
 are rendered on first access and cached on disk (``cache_dir`` or the user cache folder).
+Every frame carries its exact ground-truth depth, whatever the sensor.
 Modules: ``textures``/``urban_tiles``/``indoor_tiles`` paint tiles, ``atlas`` packs them,
 ``geometry`` and ``render`` draw boxes, ``world``/``urban``/``indoor`` define scenes and
 motion, ``cache`` renders lazily, ``layout`` reads and writes the folder layout.

@@ -118,7 +118,7 @@ def rendered_sequence(world: World, folder: Path, frames: int, sensor: str) -> S
             stem=frame_stem(i),
             image=partial(store.left, i),
             right=partial(store.right, i) if sensor == "stereo" else None,
-            depth=partial(store.depth, i) if sensor == "rgbd" else None,
+            depth=partial(store.depth, i),
         )
         for i in range(frames)
     ]

@@ -1,0 +1,126 @@
+"""Depth providers: metric depth of the clean frames for depth-aware modules.
+
+A provider turns a sequence into ``depth(index, stream) -> float32 HxW metres`` (0 = invalid,
+e.g. sky). Computed depth is stored once per sequence on disk, keyed by provider name, its
+settings and the sequence fingerprint, so every module, severity and process reuses it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from abc import ABC, abstractmethod
+from collections import OrderedDict
+from pathlib import Path
+from threading import Lock
+from typing import Any, ClassVar
+
+import numpy as np
+
+from sal_adapters.cache_dir import user_cache_dir
+from sal_adapters.images import read_depth, write_depth
+from sal_adapters.sequence import Sequence
+from sal_modules.base import DepthLookup
+
+__all__ = ["DepthProvider", "CachedDepth", "fill_holes"]
+
+
+class DepthProvider(ABC):
+    """One way to get depth: native maps, stereo matching, a monocular network.
+
+    Subclasses set ``name``, implement ``unavailable`` and ``compute``, and return their
+    settings (anything that changes the result) from ``settings``.
+    """
+
+    name: ClassVar[str] = ""
+    #: Whether results are stored in the depth cache (native depth is read directly).
+    cached: ClassVar[bool] = True
+
+    def settings(self) -> dict[str, Any]:
+        """Everything that changes the computed depth (JSON types); part of the cache key."""
+        return {}
+
+    @abstractmethod
+    def unavailable(self, sequence: Sequence) -> str | None:
+        """Why this provider cannot serve ``sequence``, or ``None`` when it can."""
+        raise NotImplementedError(f"{type(self).__name__}.unavailable")
+
+    @abstractmethod
+    def compute(self, sequence: Sequence, position: int, stream: str) -> np.ndarray:
+        """Depth (float32 m, 0 = invalid) of frame ``position`` of ``sequence`` in ``stream``."""
+        raise NotImplementedError(f"{type(self).__name__}.compute")
+
+    def key(self, sequence: Sequence) -> str:
+        """Cache key: SHA-256 of provider name, settings and the sequence fingerprint."""
+        text = json.dumps({"provider": self.name, "settings": self.settings(), "sequence": sequence.fingerprint}, sort_keys=True)
+        return hashlib.sha256(text.encode()).hexdigest()
+
+    def lookup(self, sequence: Sequence, cache_dir: Path | None = None) -> DepthLookup:
+        """``depth(index, stream)`` for the frames of ``sequence``, cached when ``cached``."""
+        return CachedDepth(self, sequence, cache_dir)
+
+    def __repr__(self) -> str:
+        args = ", ".join(f"{k}={v!r}" for k, v in self.settings().items())
+        return f"{type(self).__name__}({args})"
+
+
+class CachedDepth:
+    """Depth by dataset index and stream: memory (a few frames) -> disk -> ``compute``.
+
+    Disk entries live in ``<cache>/depth/<key>/<index>_<stream>.npy`` and are written
+    atomically, so concurrent processes computing the same frame never see a partial file.
+    """
+
+    def __init__(self, provider: DepthProvider, sequence: Sequence, cache_dir: Path | None = None, keep: int = 4):
+        self.provider = provider
+        self.sequence = sequence
+        self.folder = (Path(cache_dir) / "depth" if cache_dir else user_cache_dir("depth")) / provider.key(sequence)
+        self._positions = {record.index: position for position, record in enumerate(sequence.records)}
+        self._recent: OrderedDict[tuple[int, str], np.ndarray] = OrderedDict()
+        self._keep = keep
+        self._lock = Lock()
+
+    def __call__(self, index: int, stream: str) -> np.ndarray:
+        key = (index, stream)
+        with self._lock:
+            if key in self._recent:
+                self._recent.move_to_end(key)
+                return self._recent[key]
+        depth = self._load(index, stream)
+        with self._lock:
+            self._recent[key] = depth
+            while len(self._recent) > self._keep:
+                self._recent.popitem(last=False)
+        return depth
+
+    def _load(self, index: int, stream: str) -> np.ndarray:
+        position = self._positions[index]
+        if not self.provider.cached:
+            return self.provider.compute(self.sequence, position, stream)
+        path = self.folder / f"{index}_{stream}.npy"
+        if path.is_file():
+            return read_depth(path, None)
+        depth = np.ascontiguousarray(self.provider.compute(self.sequence, position, stream), dtype=np.float32)
+        write_depth(path, depth, None)
+        return depth
+
+
+def fill_holes(depth: np.ndarray, max_width: int) -> np.ndarray:
+    """Fill runs of invalid pixels (0) no wider than ``max_width`` px that have valid depth on
+    both sides of the row with the farther of the two neighbours (occluded background).
+
+    Wider gaps and gaps open to the image border (sky, out of view) stay 0.
+    """
+    depth = np.asarray(depth, dtype=np.float32)
+    h, w = depth.shape
+    valid = depth > 0
+    cols = np.broadcast_to(np.arange(w), (h, w))
+    left_idx = np.maximum.accumulate(np.where(valid, cols, -1), axis=1)
+    right_idx = np.minimum.accumulate(np.where(valid, cols, w)[:, ::-1], axis=1)[:, ::-1]
+    bounded = ~valid & (left_idx >= 0) & (right_idx < w) & (right_idx - left_idx - 1 <= max_width)
+    rows = np.broadcast_to(np.arange(h)[:, None], (h, w))
+    left_val = depth[rows, np.clip(left_idx, 0, w - 1)]
+    right_val = depth[rows, np.clip(right_idx, 0, w - 1)]
+    out = depth.copy()
+    out[bounded] = np.maximum(left_val, right_val)[bounded]
+    return out

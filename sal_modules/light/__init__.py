@@ -1,0 +1,1 @@
+"""Light and sensor: night, sensor noise, sun glare."""

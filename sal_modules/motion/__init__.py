@@ -1,0 +1,1 @@
+"""Camera motion and timing: motion blur, rolling shutter, stereo desynchronisation."""

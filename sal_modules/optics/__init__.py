@@ -1,0 +1,1 @@
+"""Lens and optics: soiling, cracks, defocus."""

@@ -1,0 +1,224 @@
+"""Declared parameters of perturbation modules: unit, default, valid range, search direction.
+
+A module declares each parameter as a class attribute::
+
+    class Fog(Perturbation):
+        visibility_m = Param(50.0, unit="m", min=1.0, max=100_000.0, searchable=True,
+                             worse="lower", doc="meteorological visibility (2 % contrast)")
+
+On the class, ``Fog.visibility_m`` is the ``Param`` itself (what the requirement language and
+boundary search use); on an instance it is the configured value.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, Literal
+
+from sal_modules.errors import ParameterError
+
+__all__ = ["Domain", "Worse", "SearchScale", "Param"]
+
+Domain = Literal["continuous", "integer", "choice", "vector", "flag", "text"]
+Worse = Literal["higher", "lower"]
+_DOMAINS = ("continuous", "integer", "choice", "vector", "flag", "text")
+
+
+@dataclass(frozen=True)
+class SearchScale:
+    """How boundary search walks a parameter when that differs from the parameter itself.
+
+    Example: ``frame_drop.drop_rate`` (0..1) is searched in integer percent,
+    ``SearchScale("integer", 0, 100, "%", lambda p: p / 100)``.
+
+    Attributes:
+        domain: ``continuous`` or ``integer`` search values.
+        min, max: search range in ``unit``.
+        unit: unit of the search value.
+        canonicalize: search value -> parameter value.
+    """
+
+    domain: Literal["continuous", "integer"]
+    min: float
+    max: float
+    unit: str
+    canonicalize: Callable[[float], Any]
+
+
+class Param:
+    """One declared parameter of a perturbation module.
+
+    Args:
+        default: value when none is given (``None`` allowed with ``optional=True``).
+        unit: physical unit (``m``, ``mm/h``, ``km/h``, ``ms``, ``Mbit/s``; ``""`` for none).
+        min, max: inclusive valid range of a number (or of each vector component).
+        domain: ``continuous`` (float), ``integer``, ``choice`` (one of ``choices``),
+            ``vector`` (``length`` numbers), ``flag`` (bool) or ``text`` (a string, e.g. a path).
+        searchable: boundary search may vary it.
+        worse: ``higher`` or ``lower``: the direction in which the perturbation gets stronger.
+        choices: allowed values of a ``choice`` parameter.
+        length: number of components of a ``vector``.
+        optional: ``None`` is a valid value (meaning "estimate" or "not set").
+        search: a ``SearchScale`` when search values differ from parameter values.
+        doc: one line for ``sal modules`` and error messages.
+    """
+
+    def __init__(
+        self,
+        default: Any,
+        *,
+        unit: str = "",
+        min: float | None = None,
+        max: float | None = None,
+        domain: Domain = "continuous",
+        searchable: bool = False,
+        worse: Worse | None = None,
+        choices: Sequence[Any] | None = None,
+        length: int | None = None,
+        optional: bool = False,
+        search: SearchScale | None = None,
+        doc: str = "",
+    ):
+        if domain not in _DOMAINS:
+            raise ValueError(f"domain must be one of {_DOMAINS}, got {domain!r}")
+        if searchable and (domain not in ("continuous", "integer") or worse not in ("higher", "lower")):
+            raise ValueError("a searchable parameter needs a continuous or integer domain and worse='higher'|'lower'")
+        if domain == "choice" and not choices:
+            raise ValueError("a choice parameter needs choices")
+        if domain == "vector" and not length:
+            raise ValueError("a vector parameter needs a length")
+        self.unit = unit
+        self.min = min
+        self.max = max
+        self.domain: Domain = domain
+        self.searchable = searchable
+        self.worse = worse
+        self.choices = tuple(choices) if choices is not None else None
+        self.length = length
+        self.optional = optional
+        self.search = search
+        self.doc = doc
+        self.name = ""
+        self.owner: type | None = None
+        self.default = default if default is None and optional else self.validate(default, "default")
+
+    # -- descriptor: the Param on the class, the value on an instance --------------------------
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+        self.owner = owner
+
+    def __get__(self, instance: Any, owner: type | None = None) -> Any:
+        if instance is None:
+            return self
+        return instance.params[self.name]
+
+    def __set__(self, instance: Any, value: Any) -> None:
+        raise AttributeError(f"{self.qualname} is read-only; use .with_params({self.name}=...) for a changed copy")
+
+    # -- description ---------------------------------------------------------------------------
+    @property
+    def qualname(self) -> str:
+        """``module.parameter``, e.g. ``fog.visibility_m``."""
+        module = getattr(self.owner, "name", None) or (self.owner.__name__ if self.owner else "?")
+        return f"{module}.{self.name}"
+
+    def allowed(self) -> str:
+        """What values are valid, in words with the unit: ``1 .. 100000 m``."""
+        unit = f" {self.unit}" if self.unit else ""
+        if self.domain == "choice":
+            text = "one of " + ", ".join(repr(c) for c in self.choices or ())
+        elif self.domain == "flag":
+            text = "true or false"
+        elif self.domain == "text":
+            text = "a string"
+        else:
+            lo = "-inf" if self.min is None else f"{self.min:g}"
+            hi = "inf" if self.max is None else f"{self.max:g}"
+            kind = "an integer" if self.domain == "integer" else "a number"
+            if self.domain == "vector":
+                kind = f"{self.length} numbers, each"
+            text = f"{kind} in {lo} .. {hi}{unit}"
+        return text + (" or null" if self.optional else "")
+
+    def describe(self) -> dict[str, Any]:
+        """JSON-ready description (``sal modules --json``)."""
+        info: dict[str, Any] = {
+            "name": self.name,
+            "unit": self.unit,
+            "default": list(self.default) if isinstance(self.default, tuple) else self.default,
+            "min": self.min,
+            "max": self.max,
+            "domain": self.domain,
+            "searchable": self.searchable,
+            "worse": self.worse,
+            "doc": self.doc,
+        }
+        if self.choices is not None:
+            info["choices"] = list(self.choices)
+        if self.search is not None:
+            info["search"] = {"domain": self.search.domain, "min": self.search.min, "max": self.search.max, "unit": self.search.unit}
+        return info
+
+    def search_space(self) -> SearchScale:
+        """The scale boundary search walks (the parameter's own range unless ``search`` is set)."""
+        if not self.searchable:
+            raise ParameterError(f"{self.qualname} is not searchable; searchable parameters are declared with searchable=True")
+        if self.search is not None:
+            return self.search
+        assert self.min is not None and self.max is not None
+        return SearchScale(self.domain, self.min, self.max, self.unit, lambda v: v)  # type: ignore[arg-type]
+
+    # -- validation ----------------------------------------------------------------------------
+    def validate(self, value: Any, module: str | None = None) -> Any:
+        """``value`` converted to the canonical type, or ``ParameterError`` naming module,
+        parameter, unit and valid range."""
+        if value is None and self.optional:
+            return None
+        checker = getattr(self, f"_check_{self.domain}")
+        converted = checker(value)
+        if converted is _INVALID:
+            where = f"{module}: " if module else ""
+            shown = f"{value!r}{' ' + self.unit if self.unit and _is_number(value) else ''}"
+            doc = f" ({self.doc})" if self.doc else ""
+            raise ParameterError(f"{where}{self.name} = {shown} is not valid; {self.name}{doc} must be {self.allowed()}")
+        return converted
+
+    def _in_range(self, x: float) -> bool:
+        return math.isfinite(x) and (self.min is None or x >= self.min) and (self.max is None or x <= self.max)
+
+    def _check_continuous(self, value: Any) -> Any:
+        return float(value) if _is_number(value) and self._in_range(float(value)) else _INVALID
+
+    def _check_integer(self, value: Any) -> Any:
+        if not _is_number(value) or not math.isfinite(float(value)) or float(value) != int(value):
+            return _INVALID
+        return int(value) if self._in_range(float(value)) else _INVALID
+
+    def _check_choice(self, value: Any) -> Any:
+        return value if value in (self.choices or ()) and not isinstance(value, bool) else _INVALID
+
+    def _check_vector(self, value: Any) -> Any:
+        if isinstance(value, (str, bytes)) or not isinstance(value, Sequence) or len(value) != self.length:
+            return _INVALID
+        if not all(_is_number(v) and self._in_range(float(v)) for v in value):
+            return _INVALID
+        return tuple(float(v) for v in value)
+
+    def _check_flag(self, value: Any) -> Any:
+        return value if isinstance(value, bool) else _INVALID
+
+    def _check_text(self, value: Any) -> Any:
+        return str(value) if isinstance(value, str) or hasattr(value, "__fspath__") else _INVALID
+
+    def __repr__(self) -> str:
+        return f"<Param {self.qualname} [{self.unit or '-'}] default={self.default!r}>"
+
+
+_INVALID = object()
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)

@@ -1,0 +1,1 @@
+"""Video transport: frame drops, compression, bandwidth limits."""

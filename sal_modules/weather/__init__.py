@@ -1,0 +1,1 @@
+"""Weather between scene and camera: fog, rain, snow."""
