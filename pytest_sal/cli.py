@@ -14,6 +14,8 @@ from collections.abc import Sequence as ArgList
 from pathlib import Path
 from typing import Any
 
+from pytest_sal.cli_types import parse_key_values, positive_int
+from pytest_sal.module_commands import add_module_commands
 from sal_adapters import DATASETS, SalError, open_dataset
 
 __all__ = ["main", "build_parser"]
@@ -25,6 +27,8 @@ examples:
   sal dataset info kitti /data/kitti --sequence 07 --stereo
   sal dataset info euroc /data/V1_01_easy --json
   sal dataset info synthetic --option scene=indoor --option frames=30
+  sal modules                                perturbation modules, parameters, units, ranges
+  sal preview fog visibility_m=30 --dataset synthetic --frame 5 -o fog.png
 
 Datasets are read in their own layouts (KITTI odometry, TUM RGB-D, EuRoC MAV, a folder of
 images) or rendered (the synthetic world: urban street canyon or indoor room). Rendered frames
@@ -48,7 +52,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Render both synthetic scenes, print what was made and write a contact sheet "
         "of frames and depth maps.",
     )
-    demo.add_argument("--frames", type=_positive_int, default=20, metavar="N", help="frames per scene (default: %(default)s)")
+    demo.add_argument("--frames", type=positive_int, default=20, metavar="N", help="frames per scene (default: %(default)s)")
     demo.add_argument("--seed", type=int, default=0, help="world seed (default: %(default)s)")
     demo.add_argument("--out", type=Path, default=Path("sal-demo"), metavar="DIR", help="output folder (default: %(default)s)")
     demo.set_defaults(run=_run_demo)
@@ -69,13 +73,14 @@ def build_parser() -> argparse.ArgumentParser:
     info.add_argument("--sequence", metavar="S", help="sequence inside PATH (KITTI '07', TUM or EuRoC folder name)")
     info.add_argument("--stereo", action="store_true", help="open the stereo pair")
     info.add_argument("--start", type=int, default=0, metavar="N", help="first frame (default: %(default)s)")
-    info.add_argument("--max-frames", type=_positive_int, metavar="N", help="keep at most N frames")
+    info.add_argument("--max-frames", type=positive_int, metavar="N", help="keep at most N frames")
     info.add_argument(
         "--option", "-o", action="append", default=[], metavar="KEY=VALUE",
         help="other option of the dataset kind, e.g. -o scene=indoor (values parsed as JSON when they can be)",
     )
     info.add_argument("--json", action="store_true", help="print exactly the keys frames, sensor, fps, camera, groundtruth_poses as JSON")
     info.set_defaults(run=_run_dataset_info)
+    add_module_commands(commands)
     return parser
 
 
@@ -100,29 +105,6 @@ def _show_warning(message: Warning | str, category: type[Warning], *_: Any, **__
     print(f"sal: warning: {message}", file=sys.stderr)
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a number >= 1, got {value}")
-    return value
-
-
-def _parse_options(pairs: list[str]) -> dict[str, Any]:
-    options: dict[str, Any] = {}
-    for pair in pairs:
-        key, sep, value = pair.partition("=")
-        if not sep or not key:
-            raise SalError(f"--option expects KEY=VALUE, got {pair!r}")
-        try:
-            options[key] = json.loads(value)
-        except json.JSONDecodeError:
-            options[key] = value
-    return options
-
-
 def _run_dataset_list(args: argparse.Namespace) -> int:
     for name, kind in DATASETS.items():
         options = ", ".join(["start", "max_frames", *kind.option_names()])
@@ -131,7 +113,7 @@ def _run_dataset_list(args: argparse.Namespace) -> int:
 
 
 def _run_dataset_info(args: argparse.Namespace) -> int:
-    options = _parse_options(args.option)
+    options = parse_key_values(args.option)
     if args.sequence is not None:
         options["sequence"] = args.sequence
     if args.stereo:

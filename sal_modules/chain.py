@@ -71,8 +71,9 @@ class Composite(Perturbation):
         """(step position, Param) of ``address``; ``ParameterError`` lists the valid addresses."""
         known = self.addresses()
         if address not in known:
-            valid = ", ".join(a for a in known if "@" not in a)
-            raise ParameterError(f"composite {self.label()} has no parameter {address!r}; addresses: {valid} (or name@position.parameter)")
+            plain = [a for a in known if "@" not in a]
+            valid = ", ".join(plain or list(known))
+            raise ParameterError(f"composite {self.label()} has no parameter {address!r}; addresses: {valid}")
         return known[address]
 
     @property
@@ -91,6 +92,15 @@ class Composite(Perturbation):
     def label(self) -> str:
         """``night>>fog``."""
         return ">>".join(step.name for step in self.steps)
+
+    @classmethod
+    def describe(cls) -> dict[str, Any]:
+        info = super().describe()
+        info["parameters"] = [
+            {"name": "steps", "unit": "", "default": [], "min": None, "max": None, "domain": "list",
+             "searchable": False, "worse": None, "doc": "modules applied in order; child parameters by address (fog.visibility_m)"}
+        ]
+        return info
 
     # -- JSON ----------------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
