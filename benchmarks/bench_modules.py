@@ -1,0 +1,224 @@
+"""Milliseconds per frame of every perturbation module, beside albumentations and imagecorruptions.
+
+Runs on one core (thread variables set before numpy loads, ``cv2.setNumThreads(1)``) on the
+same frames for every contender: synthetic urban frames padded to KITTI's 1241x376 and
+synthetic indoor frames at 640x480, with their exact depth. Our modules are timed through
+``apply`` after ``setup`` (per-sequence work such as crack patterns is reported apart);
+``bandwidth`` is timed as encode + decode of a whole sequence divided by its frames. Peers are
+called with comparable settings (see PEERS). Prints a Markdown table, and with ``--write``
+replaces the module section of benchmarks/RESULTS.md.
+
+The peers pull opencv-python next to our headless OpenCV, so use a separate environment:
+
+    python3 -m venv .venv-bench && .venv-bench/bin/pip install -e '.[all,bench]'
+    .venv-bench/bin/python benchmarks/bench_modules.py --write
+"""
+
+from __future__ import annotations
+
+import os
+
+for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ[_name] = "1"  # before numpy is imported
+
+import argparse  # noqa: E402
+import platform  # noqa: E402
+import time  # noqa: E402
+from collections.abc import Callable  # noqa: E402
+from dataclasses import replace  # noqa: E402
+from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
+
+import cv2  # noqa: E402
+import numpy as np  # noqa: E402
+
+from sal_adapters import FrameRecord, Sequence, open_dataset  # noqa: E402
+from sal_modules import PERTURBATIONS, ModuleContext, SequencePerturbation, create  # noqa: E402
+from sal_modules.depth import NativeDepth  # noqa: E402
+
+#: Moderate settings of our modules (the work per frame, not the look, matters here).
+SETTINGS: dict[str, dict[str, Any]] = {
+    "fog": {"visibility_m": 50.0},
+    "fog (heterogeneous)": {"visibility_m": 50.0, "heterogeneity": 0.5},
+    "rain": {"intensity_mm_h": 25.0},
+    "snow": {"intensity_mm_h": 5.0},
+    "night": {"illuminance_lux": 5.0},
+    "sensor_noise": {"iso": 1600},
+    "sun_glare": {},
+    "lens_soiling": {"particles": 40},
+    "cracked_lens": {},
+    "defocus": {},
+    "motion_blur": {"speed_kmh": 50.0},
+    "rolling_shutter": {"readout_ms": 30.0},
+    "stereo_desync": {"delay_ms": 50.0},
+    "jpeg": {"quality": 30},
+    "bandwidth": {"target_mbps": 1.0},
+    "frame_drop": {"drop_rate": 0.3},
+}
+
+
+def _albumentations(name: str, **kwargs: Any) -> Callable[[np.ndarray], np.ndarray]:
+    import albumentations as A
+
+    transform = getattr(A, name)(p=1.0, **kwargs)
+    return lambda image: transform(image=image)["image"]
+
+
+def _imagecorruptions(name: str, severity: int = 3) -> Callable[[np.ndarray], np.ndarray]:
+    if not hasattr(np, "float_"):
+        np.float_ = np.float64  # imagecorruptions 1.1.2 still uses the alias NumPy 2 removed
+    from imagecorruptions import corrupt
+
+    return lambda image: corrupt(image, corruption_name=name, severity=severity)
+
+
+#: Peer transforms doing comparable work: (label, factory).
+PEERS: dict[str, list[tuple[str, Callable[[], Callable[[np.ndarray], np.ndarray]]]]] = {
+    "fog": [
+        ("albumentations RandomFog", lambda: _albumentations("RandomFog", fog_coef_range=(0.3, 0.3))),
+        ("imagecorruptions fog", lambda: _imagecorruptions("fog")),
+    ],
+    "rain": [("albumentations RandomRain", lambda: _albumentations("RandomRain"))],
+    "snow": [
+        ("albumentations RandomSnow", lambda: _albumentations("RandomSnow")),
+        ("imagecorruptions snow", lambda: _imagecorruptions("snow")),
+    ],
+    "night": [
+        ("albumentations RandomBrightnessContrast", lambda: _albumentations("RandomBrightnessContrast", brightness_limit=(-0.5, -0.5))),
+        ("imagecorruptions brightness", lambda: _imagecorruptions("brightness")),
+    ],
+    "sensor_noise": [
+        ("albumentations ISONoise", lambda: _albumentations("ISONoise")),
+        ("imagecorruptions shot_noise", lambda: _imagecorruptions("shot_noise")),
+    ],
+    "sun_glare": [("albumentations RandomSunFlare", lambda: _albumentations("RandomSunFlare"))],
+    "lens_soiling": [
+        ("albumentations Spatter (mud)", lambda: _albumentations("Spatter", mode="mud")),
+        ("imagecorruptions spatter", lambda: _imagecorruptions("spatter")),
+    ],
+    "defocus": [
+        ("albumentations Defocus", lambda: _albumentations("Defocus")),
+        ("imagecorruptions defocus_blur", lambda: _imagecorruptions("defocus_blur")),
+    ],
+    "motion_blur": [
+        ("albumentations MotionBlur", lambda: _albumentations("MotionBlur", blur_limit=(15, 15))),
+        ("imagecorruptions motion_blur", lambda: _imagecorruptions("motion_blur")),
+    ],
+    "jpeg": [
+        ("albumentations ImageCompression", lambda: _albumentations("ImageCompression", quality_range=(30, 30))),
+        ("imagecorruptions jpeg_compression", lambda: _imagecorruptions("jpeg_compression")),
+    ],
+}
+
+
+def bench_frames(scene: str, frames: int, width: int | None = None) -> Sequence:
+    """Synthetic frames decoded into memory, optionally padded on the right to ``width``."""
+    source = open_dataset("synthetic", scene=scene, frames=frames, sensor="stereo")
+    pad = 0 if width is None else width - source.camera.width
+
+    def widen(array: np.ndarray) -> np.ndarray:
+        return cv2.copyMakeBorder(array, 0, 0, 0, pad, cv2.BORDER_REPLICATE) if pad else array
+
+    records = []
+    for frame in source:
+        left, right, depth = widen(frame.image), widen(frame.right), widen(frame.depth)
+        records.append(FrameRecord(frame.index, frame.timestamp, frame.record.stem, lambda a=left: a, lambda a=right: a, lambda a=depth: a))
+    camera = replace(source.camera, width=source.camera.width + pad)
+    return source.replace(records=records, camera=camera, content_key=f"bench:{scene}:{camera.width}")
+
+
+def median_ms(call: Callable[[int], Any], count: int) -> float:
+    """Median wall time (ms) of ``call(i)`` for i in 0..count-1."""
+    times = []
+    for i in range(count):
+        start = time.perf_counter()
+        call(i)
+        times.append(time.perf_counter() - start)
+    return float(np.median(times) * 1e3)
+
+
+def time_module(label: str, sequence: Sequence, repeats: int) -> tuple[float, float]:
+    """(setup ms, ms per frame) of one of our modules on ``sequence``."""
+    name = label.split(" ")[0]
+    module = create(name, **SETTINGS[label])
+    depth = NativeDepth().lookup(sequence)
+    start = time.perf_counter()
+    module.setup(ModuleContext(sequence=sequence, seed=1, depth=depth))
+    setup_ms = (time.perf_counter() - start) * 1e3
+    frames = [(f.index, f.image, depth(f.index, "left")) for f in sequence]
+    if isinstance(module, SequencePerturbation):
+        start = time.perf_counter()
+        module.prepare("left", ((i, image) for i, image, _ in frames))
+        for i, _, _ in frames:
+            module.result(i, "left")
+        per_frame = (time.perf_counter() - start) * 1e3 / len(frames)
+    else:
+        module.apply(frames[0][1], frames[0][2], frames[0][0], "left")  # warm-up
+        per_frame = median_ms(lambda k: module.apply(frames[k % len(frames)][1], frames[k % len(frames)][2], frames[k % len(frames)][0], "left"), repeats)
+    module.cleanup()
+    return setup_ms, per_frame
+
+
+def time_peer(factory: Callable[[], Callable[[np.ndarray], np.ndarray]], sequence: Sequence, repeats: int) -> float | str:
+    try:
+        transform = factory()
+        images = [f.image for f in sequence]
+        transform(images[0])
+        return median_ms(lambda k: transform(images[k % len(images)]), repeats)
+    except Exception as exc:  # a peer that cannot run here is reported, not fatal
+        return f"failed: {type(exc).__name__}: {str(exc)[:60]}"
+
+
+def table(repeats: int, frames: int) -> str:
+    sizes = {"1241x376": bench_frames("urban", frames, width=1241), "640x480": bench_frames("indoor", frames)}
+    available = set(PERTURBATIONS.names())
+    lines = [
+        "| module | contender | 1241x376 ms/frame | 640x480 ms/frame | setup ms (1241x376) |",
+        "|---|---|---:|---:|---:|",
+    ]
+    for label in SETTINGS:
+        if label.split(" ")[0] not in available:
+            continue
+        ours = {size: time_module(label, seq, repeats) for size, seq in sizes.items()}
+        lines.append(f"| {label} | **pytest-sal** | **{ours['1241x376'][1]:.1f}** | **{ours['640x480'][1]:.1f}** | {ours['1241x376'][0]:.0f} |")
+        for peer, factory in PEERS.get(label, []):
+            cells = [time_peer(factory, seq, repeats) for seq in sizes.values()]
+            shown = [f"{c:.1f}" if isinstance(c, float) else c for c in cells]
+            lines.append(f"| {label} | {peer} | {shown[0]} | {shown[1]} | |")
+        print(lines[-1], flush=True)
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=20, help="timed calls per contender and size (default 20)")
+    parser.add_argument("--frames", type=int, default=12, help="distinct frames cycled through (default 12)")
+    parser.add_argument("--write", action="store_true", help="replace the module section of benchmarks/RESULTS.md")
+    args = parser.parse_args()
+    cv2.setNumThreads(1)
+    result = table(args.repeats, args.frames)
+    header = (
+        f"Machine: {platform.machine()}, {os.cpu_count()} cores (one used), Python {platform.python_version()}, "
+        f"numpy {np.__version__}, OpenCV {cv2.__version__}. Median of {args.repeats} calls over {args.frames} frames."
+    )
+    print(header + "\n\n" + result)
+    if args.write:
+        write_section(header, result)
+
+
+BEGIN, END = "<!-- modules:begin -->", "<!-- modules:end -->"
+
+
+def write_section(header: str, result: str) -> None:
+    path = Path(__file__).with_name("RESULTS.md")
+    text = path.read_text()
+    section = f"{BEGIN}\n{header}\n\n{result}\n{END}"
+    if BEGIN in text:
+        text = text[: text.index(BEGIN)] + section + text[text.index(END) + len(END) :]
+    else:
+        text = text.rstrip() + "\n\n## Perturbation modules\n\n" + section + "\n"
+    path.write_text(text)
+
+
+if __name__ == "__main__":
+    main()
