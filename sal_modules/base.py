@@ -92,7 +92,7 @@ class ModuleContext:
         gt = self.sequence.groundtruth
         if gt is None or not self.sequence.groundtruth_is_per_frame:
             return None
-        return gt.select([self.position(index)]).matrices()[0]
+        return gt.select([self.position(index)]).matrices[0]
 
     def rng(self, *keys: str | int) -> np.random.Generator:
         """A generator that depends only on ``seed`` and ``keys`` (strings hashed with CRC-32)."""
