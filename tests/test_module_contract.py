@@ -51,13 +51,15 @@ def frames_of(sequence: Sequence) -> list[np.ndarray]:
 
 
 def difference(clean: Sequence, changed: Sequence) -> float:
-    """Mean absolute difference (grey levels) over the kept frames, plus one full-scale
-    difference (255) per dropped frame, so dropping frames counts as damage too."""
+    """Mean absolute difference (grey levels) over the kept frames (both cameras of a stereo
+    pair), plus one full-scale difference (255) per dropped frame, so dropping frames counts
+    as damage too."""
     positions = {r.index: p for p, r in enumerate(clean.records)}
     total, count = 0.0, 0
     for frame in changed:
         original = clean[positions[frame.index]]
-        total += float(np.abs(frame.image.astype(np.float32) - original.image).mean())
+        pairs = [(frame.image, original.image)] + ([(frame.right, original.right)] if frame.right is not None else [])
+        total += float(np.mean([np.abs(a.astype(np.float32) - b).mean() for a, b in pairs]))
         count += 1
     dropped = len(clean) - len(changed)
     return (total + 255.0 * dropped) / max(count + dropped, 1)
