@@ -21,11 +21,15 @@ from sal_adapters.camera import Camera
 from sal_adapters.datasets import DatasetKind
 from sal_adapters.errors import DatasetError, DatasetWarning
 from sal_adapters.images import IMAGE_SUFFIXES, read_image, write_image
+from sal_adapters.layout_io import fps_from_timestamps
 from sal_adapters.sequence import Frame, FrameRecord, Sequence
 from sal_adapters.textfiles import atomic_write_text, read_rows
 from sal_adapters.trajectory import Trajectory, read_times, write_times
 
 __all__ = ["KITTI", "KittiDataset", "read_calib"]
+
+#: Rate assumed for a one-frame sequence (Hz); KITTI's cameras run at about 10 Hz.
+KITTI_FPS = 10.0
 
 #: (left, right) image folders for grey and colour pairs, and their calib.txt keys.
 CAMERA_DIRS = {False: ("image_0", "image_1", "P0", "P1"), True: ("image_2", "image_3", "P2", "P3")}
@@ -99,7 +103,7 @@ class KittiDataset(DatasetKind):
         if poses_path.is_file():
             groundtruth = Trajectory.read_kitti(poses_path, times=_times_for_poses(poses_path, times))
             groundtruth = groundtruth.transformed(right=T_c0_left)
-        fps = 1.0 / float(np.median(np.diff(times))) if len(times) > 1 else 10.0
+        fps = fps_from_timestamps(times, KITTI_FPS)
         meta: dict[str, Any] = {
             "sequence": name,
             "calib": {key: value.ravel().tolist() for key, value in calib.items()},

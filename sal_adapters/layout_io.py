@@ -218,11 +218,18 @@ def read_list(path: Path, pattern: str, what: str, increasing: bool = True) -> l
 
 
 def fps_from_timestamps(timestamps: np.ndarray, default: float) -> float:
-    """``1 / median frame interval`` (Hz), or ``default`` for fewer than two frames."""
+    """The camera rate (Hz): 1 / the median of the frame intervals close to the shortest
+    common one, so gaps from dropped frames do not lower it; ``default`` for < 2 frames.
+
+    The shortest common interval is the 10th percentile of the intervals; intervals up to
+    1.5 times it count as one frame period (jitter), longer ones are gaps.
+    """
     t = np.asarray(timestamps, dtype=np.float64)
     if len(t) < 2:
         return float(default)
-    return 1.0 / float(np.median(np.diff(t)))
+    steps = np.diff(t)
+    shortest = float(np.percentile(steps, 10))
+    return 1.0 / float(np.median(steps[steps <= 1.5 * shortest]))
 
 
 # -- files ------------------------------------------------------------------------------------

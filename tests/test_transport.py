@@ -404,3 +404,12 @@ def test_dropped_frames_vanish_from_every_dataset_layout(kind: str, shared_data:
         np.testing.assert_allclose(back.groundtruth.positions, clean.groundtruth.positions[positions], atol=1e-9)
     elif clean.groundtruth is not None:  # a trajectory at its own rate is kept whole
         assert back.groundtruth.allclose(clean.groundtruth, atol=1e-9)
+
+
+def test_random_drops_keep_the_frame_rate_of_a_reopened_copy(shared_data: Path, tmp_path: Path) -> None:
+    """KITTI stores no rate: it is measured from times.txt, and the gaps left by dropped
+    frames must not lower it (a SLAM config or a later bandwidth step reads it)."""
+    clean = open_dataset("kitti", shared_data / "kitti" / "sequences" / "07", max_frames=60)
+    out = perturb(clean, create("frame_drop", drop_rate=0.6), seed=2)
+    back = open_dataset("kitti", write_sequence(out, tmp_path / "out"))
+    assert len(back) < len(clean) and back.fps == pytest.approx(clean.fps, rel=0.01)
