@@ -92,9 +92,26 @@ def preview_image(original: list[np.ndarray], perturbed: list[np.ndarray | None]
             cv2.putText(changed, "frame dropped", (20, clean.shape[0] // 2), cv2.FONT_HERSHEY_SIMPLEX, 1.0, (255, 255, 255), 2, cv2.LINE_AA)
         rows.append(np.hstack([clean, np.zeros((clean.shape[0], 8, 3), np.uint8), changed]))
     sheet = np.vstack([np.vstack([row, np.zeros((8, row.shape[1], 3), np.uint8)]) for row in rows])[:-8]
-    bar = np.zeros((28, sheet.shape[1], 3), np.uint8)
-    cv2.putText(bar, title, (8, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (255, 255, 255), 1, cv2.LINE_AA)
+    lines = _wrap(title, sheet.shape[1] - 16)
+    bar = np.zeros((8 + 20 * len(lines), sheet.shape[1], 3), np.uint8)
+    for number, line in enumerate(lines):
+        cv2.putText(bar, line, (8, 20 + 20 * number), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (255, 255, 255), 1, cv2.LINE_AA)
     return np.vstack([bar, sheet])
+
+
+def _wrap(text: str, width_px: int) -> list[str]:
+    """``text`` broken after ", " into lines no wider than ``width_px`` when drawn."""
+    import cv2
+
+    lines, current = [], ""
+    for token in text.split(", "):
+        candidate = f"{current}, {token}" if current else token
+        if current and cv2.getTextSize(candidate, cv2.FONT_HERSHEY_SIMPLEX, 0.55, 1)[0][0] > width_px:
+            lines.append(current + ",")
+            current = token
+        else:
+            current = candidate
+    return [*lines, current]
 
 
 def _run_modules(args: argparse.Namespace) -> int:
