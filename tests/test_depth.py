@@ -381,3 +381,17 @@ def test_depth_computed_once_and_cached(tmp_path, monkeypatch):
     for changed in ({"min_depth_m": 3.0}, {"block_size": 7}, {"mode": "sgbm"}, {"uniqueness": 15}, {"speckle_window": 50}, {"speckle_range": 1}, {"min_texture": 2.0}):
         assert StereoDepth(**changed).key(seq) != base, changed
     assert StereoDepth().key(synthetic("indoor")) != base  # and so does the sequence
+
+
+def test_native_right_depth_is_the_left_depth_seen_from_the_right_camera() -> None:
+    """The warped left ground truth matches the right view's own ground truth, keeps the sky
+    at 0 and fills the border band the left camera never sees (no fake sky there)."""
+    seq = synthetic("urban")
+    right = NativeDepth().compute(seq, 1, "right")
+    truth = make_world("urban", 0).render(seq[1].index, right=True)[1]
+    both = (truth > 0) & (right > 0)
+    error = np.abs(right[both] - truth[both]) / truth[both]
+    assert np.median(error) < 0.005 and (error > 0.1).mean() < 0.02
+    assert ((truth == 0) == (right == 0)).mean() > 0.99
+    band = slice(seq.camera.width - 60, None)
+    assert (right[:, band] == 0).mean() <= (truth[:, band] == 0).mean() + 0.01

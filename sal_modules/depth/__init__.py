@@ -11,7 +11,7 @@ from __future__ import annotations
 import os
 
 from sal_adapters.sequence import Sequence
-from sal_modules.depth.base import CachedDepth, DepthProvider, fill_holes
+from sal_modules.depth.base import CachedDepth, DepthProvider, fill_unknown
 from sal_modules.depth.mono import MonoDepth
 from sal_modules.depth.native import NativeDepth, left_depth_to_right
 from sal_modules.depth.stereo import StereoDepth
@@ -23,7 +23,7 @@ __all__ = [
     "MonoDepth",
     "NativeDepth",
     "StereoDepth",
-    "fill_holes",
+    "fill_unknown",
     "left_depth_to_right",
     "select_depth_provider",
 ]

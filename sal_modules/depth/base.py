@@ -22,7 +22,7 @@ from sal_adapters.images import read_depth, write_depth
 from sal_adapters.sequence import Sequence
 from sal_modules.base import DepthLookup
 
-__all__ = ["DepthProvider", "CachedDepth", "fill_holes"]
+__all__ = ["DepthProvider", "CachedDepth", "fill_unknown"]
 
 
 class DepthProvider(ABC):
@@ -105,22 +105,18 @@ class CachedDepth:
         return depth
 
 
-def fill_holes(depth: np.ndarray, max_width: int) -> np.ndarray:
-    """Fill runs of invalid pixels (0) no wider than ``max_width`` px that have valid depth on
-    both sides of the row with the farther of the two neighbours (occluded background).
-
-    Wider gaps and gaps open to the image border (sky, out of view) stay 0.
+def fill_unknown(depth: np.ndarray) -> np.ndarray:
+    """Fill unknown pixels (NaN) along each row with the farther of the nearest known pixels
+    to their left and right (an occlusion hole shows the background); ``inf`` marks sky,
+    which is farthest of all. Rows with nothing known stay NaN.
     """
     depth = np.asarray(depth, dtype=np.float32)
     h, w = depth.shape
-    valid = depth > 0
+    known = ~np.isnan(depth)
     cols = np.broadcast_to(np.arange(w), (h, w))
-    left_idx = np.maximum.accumulate(np.where(valid, cols, -1), axis=1)
-    right_idx = np.minimum.accumulate(np.where(valid, cols, w)[:, ::-1], axis=1)[:, ::-1]
-    bounded = ~valid & (left_idx >= 0) & (right_idx < w) & (right_idx - left_idx - 1 <= max_width)
+    left_idx = np.maximum.accumulate(np.where(known, cols, -1), axis=1)
+    right_idx = np.minimum.accumulate(np.where(known, cols, w)[:, ::-1], axis=1)[:, ::-1]
     rows = np.broadcast_to(np.arange(h)[:, None], (h, w))
-    left_val = depth[rows, np.clip(left_idx, 0, w - 1)]
-    right_val = depth[rows, np.clip(right_idx, 0, w - 1)]
-    out = depth.copy()
-    out[bounded] = np.maximum(left_val, right_val)[bounded]
-    return out
+    left_val = np.where(left_idx >= 0, depth[rows, np.clip(left_idx, 0, w - 1)], np.nan)
+    right_val = np.where(right_idx < w, depth[rows, np.clip(right_idx, 0, w - 1)], np.nan)
+    return np.where(known, depth, np.fmax(left_val, right_val))

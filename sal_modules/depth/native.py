@@ -6,7 +6,7 @@ import numpy as np
 
 from sal_adapters.camera import Camera
 from sal_adapters.sequence import Frame, Sequence
-from sal_modules.depth.base import DepthProvider, fill_holes
+from sal_modules.depth.base import DepthProvider, fill_unknown
 
 __all__ = ["NativeDepth", "left_depth_to_right"]
 
@@ -34,19 +34,24 @@ class NativeDepth(DepthProvider):
 def left_depth_to_right(depth: np.ndarray, camera: Camera) -> np.ndarray:
     """Forward-warp a rectified left depth map into the right camera.
 
-    A left pixel (u, v) at depth Z lands at u_r = u - fx B / Z; where several land on the same
-    right pixel the nearest wins (z-buffer), and narrow occlusion holes take the background.
+    A left pixel (u, v) at depth Z lands at u_r = u - fx B / Z; sky (0) is infinitely far and
+    lands at u_r = u. Where several land on the same right pixel the nearest wins (z-buffer).
+    Right pixels nothing lands on (occlusions, the band at the right border the left camera
+    does not see) take the farther of their row neighbours (``fill_unknown``).
     """
     if camera.baseline_m is None:
         raise ValueError("the camera has no stereo baseline")
     h, w = depth.shape
-    v, u = np.nonzero(depth > 0)
-    z = depth[v, u]
-    ur = np.rint(u - camera.fx * camera.baseline_m / z).astype(np.int64)
+    v, u = np.indices((h, w)).reshape(2, -1)
+    z = depth.reshape(-1).astype(np.float32)
+    sky = ~(z > 0)
+    far = np.where(sky, np.inf, z)
+    ur = np.rint(u - np.where(sky, 0.0, camera.fx * camera.baseline_m / np.where(sky, 1.0, z))).astype(np.int64)
     inside = (ur >= 0) & (ur < w)
-    v, ur, z = v[inside], ur[inside], z[inside]
-    order = np.argsort(-z, kind="stable")  # far first, so nearer points overwrite them
-    out = np.zeros_like(depth, dtype=np.float32)
-    out[v[order], ur[order]] = z[order]
-    max_disparity = camera.fx * camera.baseline_m / max(float(z.min()), 1e-3) if z.size else 0.0
-    return fill_holes(out, max_width=int(np.ceil(max_disparity)) + 1)
+    v, ur, far = v[inside], ur[inside], far[inside]
+    order = np.argsort(-far, kind="stable")  # far first, so nearer points overwrite them
+    out = np.full((h, w), np.nan, dtype=np.float32)
+    out[v[order], ur[order]] = far[order]
+    out = fill_unknown(out)
+    out[~np.isfinite(out)] = 0.0  # sky and rows with nothing known
+    return out
