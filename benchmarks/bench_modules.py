@@ -40,7 +40,7 @@ from sal_modules import (  # noqa: E402
     SequencePerturbation,
     create,
 )
-from sal_modules.depth import NativeDepth  # noqa: E402
+from sal_modules.depth import NativeDepth, StereoDepth  # noqa: E402
 
 #: Moderate settings of our modules (the work per frame, not the look, matters here).
 SETTINGS: dict[str, dict[str, Any]] = {
@@ -194,6 +194,9 @@ def table(repeats: int, frames: int) -> str:
             shown = [f"{c:.1f}" if isinstance(c, float) else c for c in cells]
             lines.append(f"| {label} | {peer} | {shown[0]} | {shown[1]} | |")
         print(lines[-1], flush=True)
+    lines += ["", "| depth provider | 1241x376 ms/frame | 640x480 ms/frame |", "|---|---:|---:|"]
+    stereo = [median_ms(lambda k, seq=seq: StereoDepth().compute(seq, k % len(seq), "left"), max(3, repeats // 4)) for seq in sizes.values()]
+    lines.append(f"| stereo SGBM (3-way, hole filling), per stream | {stereo[0]:.1f} | {stereo[1]:.1f} |")
     return "\n".join(lines)
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import warnings
 from collections.abc import Sequence as ArgList
@@ -99,6 +100,9 @@ def main(argv: ArgList[str] | None = None) -> int:
         except KeyboardInterrupt:
             print("sal: interrupted", file=sys.stderr)
             return 130
+        except BrokenPipeError:  # the reader went away (sal modules | head): stop quietly
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            return 0
 
 
 def _show_warning(message: Warning | str, category: type[Warning], *_: Any, **__: Any) -> None:

@@ -132,13 +132,14 @@ class Perturbation(ABC):
     # -- declared parameters -------------------------------------------------------------------
     @classmethod
     def parameters(cls) -> dict[str, Param]:
-        """Declared parameters by name, in declaration order (base classes first)."""
+        """Declared parameters by name: searchable ones first, then the rest, each group in
+        declaration order (base classes first)."""
         found: dict[str, Param] = {}
         for klass in reversed(cls.__mro__):
             for key, value in vars(klass).items():
                 if isinstance(value, Param):
                     found[key] = value
-        return found
+        return dict(sorted(found.items(), key=lambda item: not item[1].searchable))
 
     @classmethod
     def searchable(cls) -> dict[str, Param]:
