@@ -15,6 +15,7 @@ from functools import partial
 from pathlib import Path
 from threading import RLock
 
+import cv2
 import numpy as np
 
 from sal_adapters.sequence import Frame, FrameRecord, Sequence
@@ -53,7 +54,7 @@ def perturb(
     Returns:
         A ``Sequence`` of the same kind, camera and sensor whose frames, timestamps and
         per-frame ground truth exclude dropped frames; ``write_sequence`` writes it in the
-        dataset's own layout.
+        dataset's own layout. Frames of a grey camera stay grey after every step.
     """
     chain = chain_of(modules)
     provider = None
@@ -84,6 +85,15 @@ def perturb(
     }
     content_key = "perturbed:" + hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()
     return out.replace(records=records, name=f"{sequence.name}+{chain.label()}", content_key=content_key)
+
+
+def as_grey(image: np.ndarray) -> np.ndarray:
+    """A grey camera sees grey: an RGB result with colour (brown dirt, a warm lamp) becomes
+    its luma (Rec. 601, as OpenCV), repeated in three channels; grey input is returned as is."""
+    if (image[..., 0] == image[..., 1]).all() and (image[..., 1] == image[..., 2]).all():
+        return image
+    grey = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)
+    return cv2.merge([grey, grey, grey])
 
 
 class _ChainRun:
@@ -130,7 +140,7 @@ class _ChainRun:
                 f"{step.name} dropped frame {record.index} in apply() although keep_frame() kept it; "
                 "a module that drops frames must set drops_frames = True and decide in keep_frame(index)"
             )
-        return out
+        return as_grey(out) if self.sequence.grayscale else out
 
     def _prepare(self, count: int, stream: str) -> None:
         step = self.steps[count - 1]
