@@ -22,11 +22,22 @@ raw image and is textured (local standard deviation >= ``min_texture`` grey leve
 right camera's depth is matched the same way on the horizontally flipped, swapped pair.
 
 Holes (``fill_disparity``, per row, vectorised). A strip at the left border narrower than the
-first valid disparity ``dR`` (it matches outside the other image) takes ``dR``; a gap between
+first valid disparity ``dR`` (it matches outside the other image; counted from the first
+column where the other image's rectified row holds raw content) takes ``dR``; a gap between
 ``dL`` and ``dR`` no wider than ``|dL - dR| + 2 b`` (an occlusion) takes ``min(dL, dR)``, the
 background; a gap with valid depth on all four sides (at most a quarter of the image in each
-direction) is interpolated linearly along the row (exact on planes). Sky, overexposed windows
-and other gaps open to the image border stay unknown.
+direction) is interpolated linearly along the row (exact on planes).
+
+Border (``fill_unmeasurable``, on the output depth, vectorised). Unknown depth means sky to
+the weather modules, so unknown pixels the geometry explains take the depth of the nearest
+dependable pixel (inside a ``2 b + 1`` square of depth, on a smooth surface, in a region of at
+least 1 % of the image): pixels that cannot be matched whatever the scene (the block leaves
+the rectified raw content, or the other camera sees nothing of the row within the disparity
+range: the curved rectification border, rows only one camera sees) and unknown regions that
+reach the left, right or bottom border but not the top (surface hidden from the other
+camera by a near object, nearer than the disparity range, cut by the border). Sky,
+overexposed windows and other unknown regions open to the top stay unknown, and so does the
+unmeasurable border next to them; holes enclosed by depth stay unknown too.
 
 Depth. ``Z = f B / d`` (m) for disparity ``d`` (px) >= 1 px (nearer than ``f B``); smaller or
 missing disparities are 0 (unknown). For a pair that had to be rectified, each raw pixel ``p``
@@ -49,7 +60,7 @@ from sal_adapters.sequence import Sequence
 from sal_modules.depth.base import DepthProvider
 from sal_modules.errors import ModuleError
 
-__all__ = ["StereoDepth", "StereoRig", "fill_disparity", "stereo_rig"]
+__all__ = ["StereoDepth", "StereoRig", "fill_disparity", "fill_unmeasurable", "stereo_rig"]
 
 #: SGBM modes by option name (``3way`` is the fastest, ``hh`` the full 8-path variant).
 MODES = {"sgbm": cv2.StereoSGBM_MODE_SGBM, "3way": cv2.StereoSGBM_MODE_SGBM_3WAY, "hh": cv2.StereoSGBM_MODE_HH, "hh4": cv2.StereoSGBM_MODE_HH4}
@@ -59,6 +70,8 @@ REFERENCE_AREA = 1241 * 376
 MAX_RECTIFIED_AREA = 2.25
 #: Smallest disparity (px) turned into depth.
 MIN_DISPARITY_PX = 1.0
+#: Largest relative depth step (log) between neighbours inside one surface when filling.
+STEP = 0.1
 
 
 @dataclass(frozen=True, eq=False)
@@ -175,7 +188,7 @@ class StereoDepth(DepthProvider):
 
     name = "stereo"
     #: Algorithm version: part of the cache key, bumped when the output changes.
-    version = 1
+    version = 2
 
     def __init__(
         self,
@@ -267,19 +280,45 @@ class StereoDepth(DepthProvider):
             grey = {s: cv2.remap(g, *rig.to_rectified[s], cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT) for s, g in grey.items()}
         usable = {s: self.usable(g, rig.inside.get(s), rig) for s, g in grey.items()}
         margin = 2 * self.block(rig)
+        inside = rig.inside or {s: np.ones(grey[s].shape, np.uint8) for s in grey}
         if stream == "right":  # the right view is the left view of the mirrored, swapped pair
             flip = {s: g[:, ::-1] for s, g in grey.items()}
+            measurable, start = self.measurable(inside["right"][:, ::-1], inside["left"][:, ::-1], rig)
             disparity = _checked(self.disparity(flip["right"], flip["left"], rig), usable["right"][:, ::-1], usable["left"][:, ::-1])
-            disparity = fill_disparity(disparity, margin)[:, ::-1]
+            disparity = fill_disparity(disparity, margin, start)[:, ::-1]
+            measurable = measurable[:, ::-1]
         else:
+            measurable, start = self.measurable(inside["left"], inside["right"], rig)
             disparity = _checked(self.disparity(grey["left"], grey["right"], rig), usable["left"], usable["right"])
-            disparity = fill_disparity(disparity, margin)
+            disparity = fill_disparity(disparity, margin, start)
         valid = disparity >= MIN_DISPARITY_PX
         depth = np.where(valid, rig.focal * rig.baseline / np.where(valid, disparity, 1.0), 0.0).astype(np.float32)
-        if rig.rectified:
-            return depth
-        x, y, factor = rig.to_raw[stream]
-        return cv2.remap(depth, x, y, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT) * factor
+        if not rig.rectified:
+            x, y, factor = rig.to_raw[stream]
+            depth = cv2.remap(depth, x, y, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT) * factor
+            measurable = cv2.remap(measurable.astype(np.uint8), x, y, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=0) > 0
+        return fill_unmeasurable(depth, ~measurable, 2 * self.block(rig) + 1)
+
+    def measurable(self, own: np.ndarray, other: np.ndarray, rig: StereoRig) -> tuple[np.ndarray, np.ndarray]:
+        """Pixels of a rectified left view that geometry lets be matched, and per row the
+        first column of the other view a match may land on.
+
+        ``own`` and ``other`` (uint8 0/1) mark the rectified pixels showing raw content of this
+        view and of the other one. A pixel is measurable when its matching block lies inside
+        ``own`` and the other view's usable area (blocks inside ``other``) holds some column
+        ``u - d`` of its row for a disparity ``1 <= d < numDisparities``.
+        """
+        kernel = np.ones((self.block(rig),) * 2, np.uint8)
+        mine = cv2.erode(own, kernel, borderType=cv2.BORDER_CONSTANT, borderValue=0) > 0
+        theirs = cv2.erode(other, kernel, borderType=cv2.BORDER_CONSTANT, borderValue=0) > 0
+        h, w = theirs.shape
+        # seen: some column of u - numDisparities + 1 .. u - 1 is usable in the other view
+        count = np.zeros((h, w + 1), np.int32)
+        np.cumsum(theirs, axis=1, out=count[:, 1:])
+        u = np.arange(w)
+        seen = count[:, u] - count[:, np.maximum(u - self.num_disparities(rig) + 1, 0)] > 0
+        start = np.where(theirs.any(axis=1), np.argmax(theirs, axis=1), w)
+        return mine & seen, start
 
     def usable(self, grey: np.ndarray, inside: np.ndarray | None, rig: StereoRig) -> np.ndarray:
         """Pixels whose matching block is textured (local standard deviation >= ``min_texture``
@@ -311,11 +350,12 @@ def _checked(disparity: np.ndarray, usable_left: np.ndarray, usable_right: np.nd
     return np.where(ok, disparity, 0.0)
 
 
-def fill_disparity(disparity: np.ndarray, margin: int) -> np.ndarray:
+def fill_disparity(disparity: np.ndarray, margin: int, start: np.ndarray | None = None) -> np.ndarray:
     """Fill gaps of unknown disparity (< 1 px) of a left view that the geometry explains.
 
     Border strip: the first ``u`` columns of a row whose first valid disparity ``dR`` at
-    column ``u`` is at least ``u - margin`` match outside the other image; they take ``dR``.
+    column ``u`` is at least ``u - start - margin`` match outside the other image, whose
+    usable part of that row begins at column ``start`` (per row, default 0); they take ``dR``.
     Occlusions: a row gap between valid neighbours ``dL`` and ``dR`` no wider than
     ``|dL - dR| + margin`` px (the background strip the nearer surface hides from the other
     camera, plus small matching gaps) takes the farther neighbour's disparity. Enclosed holes:
@@ -331,7 +371,8 @@ def fill_disparity(disparity: np.ndarray, margin: int) -> np.ndarray:
     l, r = left[v, u], right[v, u]
     v, u, l, r = v[r < w], u[r < w], l[r < w], r[r < w]
     d_right = disparity[v, r]
-    border = (l < 0) & (r <= d_right + margin)
+    first = 0 if start is None else np.asarray(start)[v]
+    border = (l < 0) & (r - first <= d_right + margin)
     d_left = np.where(l < 0, d_right, disparity[v, np.maximum(l, 0)])
     width = r - l - 1
     occluded = border | ((l >= 0) & (width <= np.abs(d_left - d_right) + margin))
@@ -341,6 +382,70 @@ def fill_disparity(disparity: np.ndarray, margin: int) -> np.ndarray:
     out = disparity.astype(np.float32, copy=True)
     out[v[fill], u[fill]] = value[fill]
     return out
+
+
+def fill_unmeasurable(depth: np.ndarray, unmeasurable: np.ndarray, solid: int = 11, region: float = 0.01) -> np.ndarray:
+    """Give unknown depth (0) that the geometry explains the depth of the nearest dependable pixel.
+
+    Dependable depth covers a ``solid`` x ``solid`` square of pixels with depth, in a region
+    of such pixels covering at least ``region`` of the image (thin streaks and stray patches
+    of depth are often mismatches). ``unmeasurable`` marks pixels that cannot be matched
+    whatever the scene: their block leaves the image, or the other camera sees nothing of
+    their row. The other pixels without dependable depth form connected regions
+    (4-connected). A region open to the top (it reaches the first measurable pixel of some
+    column) may be sky and stays as it is, as does a region enclosed by dependable depth (it
+    reaches no border of the measurable area). A region that reaches only the left, right or
+    bottom border is surface the other camera could not match (occluded by a near object,
+    beyond the disparity range, cut by the image border): its unknown pixels take the depth
+    of the nearest dependable pixel, and so do the unmeasurable ones, unless an unknown pixel
+    of a region open to the top is nearer: the border above the sky stays 0, the border
+    below a wall takes the wall's depth. Pixels with depth keep it.
+    """
+    unmeasurable = np.asarray(unmeasurable, bool)
+    known = depth > 0
+    if known.all() or not known.any():
+        return depth
+    kernel = np.ones((solid, solid), np.uint8)
+
+    def dependable(mask: np.ndarray) -> np.ndarray:
+        opened = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_OPEN, kernel)
+        _, parts, stats, _ = cv2.connectedComponentsWithStats(opened, connectivity=4)
+        large = stats[:, cv2.CC_STAT_AREA] >= region * depth.size
+        large[0] = False
+        return large[parts]
+
+    rest = ~dependable(known) & ~unmeasurable
+    count, labels = cv2.connectedComponents(rest.astype(np.uint8), connectivity=4)
+    top = np.zeros(count, bool)
+    top[labels[rest & _beyond(unmeasurable, 0, False)]] = True
+    border = top.copy()
+    for axis, reverse in ((0, True), (1, False), (1, True)):
+        border[labels[rest & _beyond(unmeasurable, axis, reverse)]] = True
+    fill = ~known & (unmeasurable | (rest & (border & ~top)[labels]))
+    sky = ~known & rest & top[labels]
+    # fill values come from smooth surfaces only: cut the depth at steps of more than STEP
+    log = np.log(np.where(known, depth, 1.0))
+    step = np.zeros_like(known)
+    step[:, 1:] |= np.abs(np.diff(log, axis=1)) > STEP
+    step[1:] |= np.abs(np.diff(log, axis=0)) > STEP
+    step[:, :-1] |= step[:, 1:].copy()
+    step[:-1] |= step[1:].copy()
+    source = dependable(known & ~step) | sky
+    if not fill.any() or not source.any():
+        return depth
+    _, nearest = cv2.distanceTransformWithLabels((~source).astype(np.uint8), cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL)
+    values = depth.ravel()[np.flatnonzero(source)]
+    return np.where(fill, values[np.maximum(nearest, 1) - 1], depth).astype(np.float32)
+
+
+def _beyond(outside: np.ndarray, axis: int, reverse: bool) -> np.ndarray:
+    """Pixels whose every pixel towards one edge of the image (``axis`` 0: the top, 1: the
+    left; ``reverse``: the bottom, the right) is ``outside``; the pixels on the edge count."""
+    mask = np.flip(outside, axis) if reverse else outside
+    run = np.logical_and.accumulate(mask, axis=axis)
+    first = np.ones_like(run[:1] if axis == 0 else run[:, :1])
+    run = np.concatenate([first, run[:-1] if axis == 0 else run[:, :-1]], axis=axis)
+    return np.flip(run, axis) if reverse else run
 
 
 def _neighbours(valid: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray]:
