@@ -1,8 +1,25 @@
-"""SLAM systems under test (registry: entry-point group ``sal.systems``)."""
+"""SLAM systems under test (registry: entry-point group ``sal.systems``).
+
+>>> from sal_wrappers import create
+>>> system = create("reference_vo")                       # doctest: +SKIP
+>>> result = system.run(sequence, workdir, timeout=120)    # doctest: +SKIP
+>>> result.tracking_rate, result.trajectory                # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+from typing import Any
 
 from sal_adapters.plugins import EntryPointRegistry
+from sal_wrappers.base import RunResult, SlamSystem, SlamSystemError, TrackState
 
-__all__ = ["SYSTEMS"]
+__all__ = ["RunResult", "SYSTEMS", "SlamSystem", "SlamSystemError", "TrackState", "create"]
 
 #: SLAM systems by name; built-ins and plug-ins register in ``sal.systems``.
-SYSTEMS: EntryPointRegistry[type] = EntryPointRegistry("sal.systems", "SLAM system")
+SYSTEMS: EntryPointRegistry[type[SlamSystem]] = EntryPointRegistry("sal.systems", "SLAM system")
+
+
+def create(name: str, **options: Any) -> SlamSystem:
+    """A configured SLAM system: ``create("orbslam3", features=2000)``. An unknown name lists
+    the known ones; a bad option is a ``SlamSystemError`` naming it."""
+    return SYSTEMS.get(name)(**options)

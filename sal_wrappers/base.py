@@ -1,0 +1,220 @@
+"""The SLAM-system contract: what a system under test is given and what one run gives back.
+
+A system receives a ``Sequence`` (possibly perturbed, possibly with dropped frames), a work
+folder and a timeout, and returns a ``RunResult``. A run never raises for a failure of the
+system itself (crash, ``exit(-1)``, hang, lost track): the failure is recorded in the result
+with its reason and the tail of the log, so that the caller goes on with the next trial.
+``SalError`` is raised only for bad use (a sensor the system does not support, bad options).
+"""
+
+from __future__ import annotations
+
+import enum
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+
+from sal_adapters import Sequence, Trajectory
+from sal_adapters.errors import SalError
+
+__all__ = ["RunResult", "SlamSystem", "SlamSystemError", "TrackState"]
+
+
+class SlamSystemError(SalError):
+    """Bad use of a SLAM system: unknown option, unsupported sensor, missing executable."""
+
+
+class TrackState(enum.IntEnum):
+    """Tracking state of one frame given to a system."""
+
+    NOT_INITIALISED = 0  #: before the system had a map (or after a reset, before the next one)
+    OK = 1  #: tracked: the frame has a valid pose
+    LOST = 2  #: the system had a map and lost track on this frame
+
+    @classmethod
+    def parse(cls, name: str | int) -> TrackState:
+        """``"ok"``, ``"lost"``, ``"not_initialised"`` (or the integer value)."""
+        if isinstance(name, (int, np.integer)):
+            return cls(int(name))
+        return cls[str(name).upper()]
+
+
+@dataclass(frozen=True, eq=False)
+class RunResult:
+    """What one run of a SLAM system on one sequence gave.
+
+    Attributes:
+        system: name of the system (``orbslam3``, ``reference_vo``, ``command``).
+        sequence: name of the sequence given.
+        sensor: ``mono``, ``stereo`` or ``rgbd``: the mode the system ran in.
+        timestamps: times (s) of the frames the system was given, in order.
+        states: ``TrackState`` value per frame given (int8 array, same length).
+        trajectory: the estimate that is scored: camera-to-world poses (TUM convention) at
+            the timestamps of frames with state OK; ``None`` when no frame was tracked.
+        scored: which trajectory ``trajectory`` is (``"online"``: per-frame tracking poses of
+            the largest map segment; ``"final"``: the system's own refined trajectory).
+        final_trajectory: the system's own final (refined) trajectory, when it writes one.
+        maps: number of map segments (a new one starts after a loss or reset); 0 if none.
+        wall_time_s: wall time of the whole run (s), including start-up.
+        track_time_s: time spent in the system's per-frame tracking calls (s), when known.
+        exit_status: exit status of the child process (negative: killed by that signal),
+            ``None`` for an in-process run.
+        failure: why the run failed (crash, exit status, timeout, nothing tracked); ``None``
+            when it ran to the end.
+        log_path: the run's log file (the system's own output), when there is one.
+        log_tail: the last lines of that log (kept for messages when the file is gone).
+        info: anything else the system reports (settings file, vocabulary, options).
+    """
+
+    system: str
+    sequence: str
+    sensor: str
+    timestamps: np.ndarray
+    states: np.ndarray
+    trajectory: Trajectory | None = None
+    scored: str = "online"
+    final_trajectory: Trajectory | None = None
+    maps: int = 0
+    wall_time_s: float = 0.0
+    track_time_s: float | None = None
+    exit_status: int | None = None
+    failure: str | None = None
+    log_path: Path | None = None
+    log_tail: str = ""
+    info: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        t = np.asarray(self.timestamps, dtype=np.float64).reshape(-1)
+        s = np.asarray(self.states, dtype=np.int8).reshape(-1)
+        if len(t) != len(s):
+            raise ValueError(f"run result has {len(t)} timestamps but {len(s)} states")
+        object.__setattr__(self, "timestamps", t)
+        object.__setattr__(self, "states", s)
+
+    @property
+    def ok(self) -> bool:
+        """The run ran to the end (it may still have tracked badly)."""
+        return self.failure is None
+
+    @property
+    def frames(self) -> int:
+        """Frames given to the system."""
+        return len(self.states)
+
+    @property
+    def tracked(self) -> int:
+        """Frames with state OK."""
+        return int(np.count_nonzero(self.states == TrackState.OK))
+
+    @property
+    def tracking_rate(self) -> float:
+        """Frames with a valid pose / frames given (0 when no frame was given)."""
+        return self.tracked / self.frames if self.frames else 0.0
+
+    @property
+    def first_tracked(self) -> int | None:
+        """Position of the first frame with state OK, or ``None``."""
+        hits = np.flatnonzero(self.states == TrackState.OK)
+        return int(hits[0]) if len(hits) else None
+
+    def summary(self) -> str:
+        """One line: system, frames tracked, maps, time, failure."""
+        text = f"{self.system} on {self.sequence} ({self.sensor}): {self.tracked}/{self.frames} frames tracked"
+        text += f", {self.maps} map(s), {self.wall_time_s:.1f} s, scored trajectory: {self.scored}"
+        return text + (f"; FAILED: {self.failure}" if self.failure else "")
+
+    # -- persistence (cache entries, child-process results) ------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary; ``RunResult.from_dict`` restores it."""
+
+        def trajectory(t: Trajectory | None) -> list[list[float]] | None:
+            if t is None:
+                return None
+            return np.column_stack([t.timestamps, t.positions, t.quaternions]).tolist()
+
+        return {
+            "system": self.system,
+            "sequence": self.sequence,
+            "sensor": self.sensor,
+            "timestamps": self.timestamps.tolist(),
+            "states": [TrackState(int(s)).name.lower() for s in self.states],
+            "trajectory": trajectory(self.trajectory),
+            "scored": self.scored,
+            "final_trajectory": trajectory(self.final_trajectory),
+            "maps": self.maps,
+            "wall_time_s": self.wall_time_s,
+            "track_time_s": self.track_time_s,
+            "exit_status": self.exit_status,
+            "failure": self.failure,
+            "log_path": None if self.log_path is None else str(self.log_path),
+            "log_tail": self.log_tail,
+            "info": self.info,
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> RunResult:
+        """Inverse of ``to_dict``."""
+
+        def trajectory(rows: list[list[float]] | None) -> Trajectory | None:
+            if rows is None:
+                return None
+            a = np.asarray(rows, dtype=np.float64).reshape(-1, 8)
+            return Trajectory(a[:, 0], a[:, 1:4], a[:, 4:8])
+
+        data = dict(data)
+        data["states"] = [TrackState.parse(s).value for s in data["states"]]
+        data["trajectory"] = trajectory(data.get("trajectory"))
+        data["final_trajectory"] = trajectory(data.get("final_trajectory"))
+        data["log_path"] = None if data.get("log_path") is None else Path(data["log_path"])
+        return cls(**data)
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict())
+
+    @classmethod
+    def from_json(cls, text: str) -> RunResult:
+        return cls.from_dict(json.loads(text))
+
+
+class SlamSystem:
+    """Base class of a SLAM system under test.
+
+    Subclasses set ``name``, ``sensors`` and ``description``, take their options as keyword
+    arguments in ``__init__`` (checked there: ``SlamSystemError`` names a bad one) and implement
+    ``run``. ``options()`` returns the options as a JSON-ready dict (part of cache keys).
+    """
+
+    name: ClassVar[str] = ""
+    #: sensors the system can run on: a subset of ``mono``, ``stereo``, ``rgbd``
+    sensors: ClassVar[tuple[str, ...]] = ()
+    description: ClassVar[str] = ""
+    #: bumped when a change of the implementation changes results (cache keys)
+    version: ClassVar[int] = 1
+
+    def options(self) -> dict[str, Any]:
+        """The configured options (JSON-ready)."""
+        return {}
+
+    def mode_for(self, sequence: Sequence, mode: str | None = None) -> str:
+        """The sensor mode to run ``sequence`` in: ``mode`` if given, else the sequence's own
+        sensor. Raises ``SlamSystemError`` when the system or the sequence cannot do it."""
+        mode = mode or sequence.sensor
+        if mode not in self.sensors:
+            raise SlamSystemError(f"{self.name} does not run in {mode!r} mode; it supports {', '.join(self.sensors)}")
+        can = {"mono": True, "stereo": sequence.sensor == "stereo", "rgbd": sequence.sensor == "rgbd"}
+        if not can.get(mode, False):
+            raise SlamSystemError(f"{self.name}: sequence {sequence.name!r} is {sequence.sensor}, it cannot run in {mode!r} mode")
+        return mode
+
+    def run(self, sequence: Sequence, workdir: Path, timeout: float | None = None) -> RunResult:
+        """Run on ``sequence``; write logs and files under ``workdir``; give up after
+        ``timeout`` seconds (``None``: no limit). Failures of the system come back in the
+        result, never as an exception."""
+        raise NotImplementedError
+
+    def __repr__(self) -> str:
+        opts = ", ".join(f"{k}={v!r}" for k, v in self.options().items())
+        return f"{type(self).__name__}({opts})"
