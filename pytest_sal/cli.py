@@ -17,6 +17,7 @@ from typing import Any
 
 from pytest_sal.cli_types import parse_key_values, positive_int
 from pytest_sal.module_commands import add_module_commands
+from pytest_sal.vocab_command import add_vocab_commands
 from sal_adapters import DATASETS, SalError, open_dataset
 
 __all__ = ["main", "build_parser"]
@@ -82,6 +83,7 @@ def build_parser() -> argparse.ArgumentParser:
     info.add_argument("--json", action="store_true", help="print exactly the keys frames, sensor, fps, camera, groundtruth_poses as JSON")
     info.set_defaults(run=_run_dataset_info)
     add_module_commands(commands)
+    add_vocab_commands(commands)
     return parser
 
 

@@ -32,3 +32,14 @@ def isolated_sal_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
         os.environ.pop("SAL_CACHE_DIR", None)
     else:
         os.environ["SAL_CACHE_DIR"] = previous
+
+
+@pytest.fixture(scope="session")
+def orb_vocabulary(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The default ORB-SLAM3 vocabulary (k=10, L=6; or ``$SAL_ORB_VOCABULARY``), built at most
+    once per test run: xdist workers share the folder beside their basetemps and its lock."""
+    from sal_wrappers.vocabulary import ensure_vocabulary
+
+    base = tmp_path_factory.getbasetemp()
+    folder = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "orb-vocabulary"
+    return ensure_vocabulary(cache_dir=folder)
