@@ -30,9 +30,9 @@ class SlamSystemError(SalError):
 class TrackState(enum.IntEnum):
     """Tracking state of one frame given to a system."""
 
-    NOT_INITIALISED = 0  #: before the system had a map (or after a reset, before the next one)
+    NOT_INITIALISED = 0  #: before the first tracked frame: the system has no map yet
     OK = 1  #: tracked: the frame has a valid pose
-    LOST = 2  #: the system had a map and lost track on this frame
+    LOST = 2  #: not tracked after a tracked frame (lost track, or reset and not yet re-initialised)
 
     @classmethod
     def parse(cls, name: str | int) -> TrackState:

@@ -130,6 +130,10 @@ def run_child(
     finally:
         if watchdog:
             watchdog.cancel()
+        try:
+            process.stdin.close()  # also when the child died mid-stream (no leaked pipe)
+        except OSError:
+            pass
         if process.poll() is None:
             _kill(process)
             process.wait()

@@ -1,0 +1,426 @@
+"""ORB-SLAM3 (through ``pyorbslam3``) as a system under test, run in a child process.
+
+>>> system = create("orbslam3", features=2000)                       # doctest: +SKIP
+>>> result = system.run(sequence, workdir, timeout=120)               # doctest: +SKIP
+
+ORB-SLAM3 calls ``exit(-1)`` on a bad settings file and segfaults on a bad vocabulary or when
+saving an empty map, so every run happens in a child process (``sal_wrappers.child``); its
+C++ output goes to ``workdir/orbslam3.log``. The parent writes the settings file from the
+sequence's camera (``sal_wrappers.orbslam3_settings``), streams grey frames to the child and
+turns what the child recorded into a ``RunResult``.
+
+Tracking states (ORB-SLAM3 ``TrackingState`` -> ``TrackState``):
+
+* every state before the first ``OK`` frame -> ``NOT_INITIALISED``;
+* ``OK`` (and ``OK_KLT``) -> ``OK``;
+* after the first ``OK``: ``RECENTLY_LOST`` and ``LOST`` -> ``LOST``, and ``NOT_INITIALIZED``,
+  ``NO_IMAGES_YET``, ``SYSTEM_NOT_READY`` -> ``LOST`` too: ORB-SLAM3 reports them after it
+  reset the map it lost, so the system had a map and lost it. Frames the child never reported
+  on (it crashed or timed out first) follow the same rule.
+
+Map segments: a new segment starts at the first ``OK`` frame after a frame whose ORB-SLAM3
+state was ``LOST``, ``NOT_INITIALIZED``, ``NO_IMAGES_YET`` or ``SYSTEM_NOT_READY`` (a new or
+reset map, with its own origin and, in monocular, its own scale). ``RECENTLY_LOST`` frames
+that come back to ``OK`` (relocalised in the same map) stay in their segment. ``maps`` counts
+the segments; the scored ``trajectory`` (``scored="online"``) holds the per-frame ``pose_wc``
+of the ``OK`` frames of the largest segment (most ``OK`` frames, the earlier one on a tie).
+``final_trajectory`` is ORB-SLAM3's own ``save_trajectory_euroc()`` after ``shutdown()``
+(biggest map, keyframes refined by bundle adjustment); it is saved only when at least one
+frame was ``OK`` (saving a never-initialised map segfaults).
+
+A run in which no frame was tracked is not a failure (``failure`` is ``None``): it is a
+tracking result (``tracking_rate`` 0, ``trajectory`` ``None``). ``failure`` is set only when
+the child did not finish: exit status, signal, timeout. The child writes its per-frame
+records about once a second and before shutting down and saving, so a crash in saving or a
+timeout still leaves the per-frame states and poses; ``failure`` then says what was kept and
+``info["partial"]`` is ``True``.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sal_adapters import Sequence, Trajectory
+from sal_wrappers.base import RunResult, SlamSystem, SlamSystemError, TrackState
+from sal_wrappers.child import run_child, write_result
+from sal_wrappers.orbslam3_settings import OrbParameters, write_settings
+
+__all__ = ["ORB_STATES", "OrbSlam3", "map_states", "read_final_trajectory", "segment_ids"]
+
+#: ORB-SLAM3 ``TrackingState`` values by name (pyorbslam3 0.1.1).
+ORB_STATES: dict[str, int] = {
+    "SYSTEM_NOT_READY": -1,
+    "NO_IMAGES_YET": 0,
+    "NOT_INITIALIZED": 1,
+    "OK": 2,
+    "RECENTLY_LOST": 3,
+    "LOST": 4,
+    "OK_KLT": 5,
+}
+_OK = {ORB_STATES["OK"], ORB_STATES["OK_KLT"]}
+_RECENTLY_LOST = ORB_STATES["RECENTLY_LOST"]
+_NAMES = {v: k for k, v in ORB_STATES.items()}
+_SENSORS = {"mono": "MONOCULAR", "stereo": "STEREO", "rgbd": "RGBD"}
+_PHASES = {
+    "loading": "while loading the vocabulary and settings",
+    "tracking": "while tracking",
+    "shutdown": "while shutting down",
+    "saving": "while saving the final trajectory",
+}
+#: Seconds between two writes of the child's per-frame records while tracking.
+_FLUSH_INTERVAL_S = 1.0
+
+
+def map_states(raw: list[int | None]) -> np.ndarray:
+    """``TrackState`` per frame (int8) from ORB-SLAM3 states (``None``: not reported); see the
+    module text for the rule."""
+    out = np.empty(len(raw), dtype=np.int8)
+    tracked = False
+    for i, state in enumerate(raw):
+        if state in _OK:
+            tracked = True
+            out[i] = TrackState.OK
+        else:
+            out[i] = TrackState.LOST if tracked else TrackState.NOT_INITIALISED
+    return out
+
+
+def segment_ids(raw: list[int | None]) -> np.ndarray:
+    """Map segment (0, 1, ...) of every ``OK`` frame, -1 for the others; see the module text."""
+    ids = np.full(len(raw), -1, dtype=np.int64)
+    segment, broken = -1, True
+    for i, state in enumerate(raw):
+        if state in _OK:
+            if broken:
+                segment, broken = segment + 1, False
+            ids[i] = segment
+        elif state != _RECENTLY_LOST:
+            broken = True
+    return ids
+
+
+def read_final_trajectory(path: Path, frame_times: np.ndarray, tolerance_s: float = 1e-3) -> Trajectory:
+    """Read ORB-SLAM3's ``save_trajectory_euroc`` file and put its times on the frames' times.
+
+    The file has one line per frame, space-separated: ``1e9 * t`` (ns, printed with 6
+    decimals; a float64, so absolute EuRoC times are off by up to 256 ns), ``tx ty tz`` (m) and
+    ``qx qy qz qw`` (Hamilton, x y z w: TUM order, not EuRoC's w-first). Each time is replaced
+    by the nearest frame time when that is within ``tolerance_s`` (s).
+    """
+    rows = []
+    for line in Path(path).read_text().splitlines():
+        fields = line.split()
+        if not fields or fields[0].startswith("#"):
+            continue
+        if len(fields) != 8:
+            raise ValueError(f"{path}: expected 8 values per line (t [ns], tx ty tz, qx qy qz qw), got {len(fields)}")
+        rows.append([float(v) for v in fields])
+    if not rows:
+        raise ValueError(f"{path}: no poses")
+    table = np.asarray(rows)
+    times = table[:, 0] * 1e-9
+    frame_times = np.sort(np.asarray(frame_times, dtype=np.float64))
+    if len(frame_times):
+        pos = np.clip(np.searchsorted(frame_times, times), 1, max(1, len(frame_times) - 1))
+        lo = frame_times[np.maximum(pos - 1, 0)]
+        hi = frame_times[np.minimum(pos, len(frame_times) - 1)]
+        nearest = np.where(np.abs(times - lo) <= np.abs(hi - times), lo, hi)
+        times = np.where(np.abs(nearest - times) <= tolerance_s, nearest, times)
+    return Trajectory(times, table[:, 1:4], table[:, 4:8])
+
+
+def _check_int(name: str, value: Any, low: int, high: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not low <= int(value) <= high:
+        raise SlamSystemError(f"orbslam3: option {name}={value!r} is not allowed; use an integer from {low} to {high}")
+    return int(value)
+
+
+def _check_real(name: str, value: Any, low: float, high: float, what: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) or not math.isfinite(float(value)):
+        raise SlamSystemError(f"orbslam3: option {name}={value!r} is not allowed; use a number {what}")
+    if not low < float(value) <= high:
+        raise SlamSystemError(f"orbslam3: option {name}={value!r} is not allowed; use a number {what}")
+    return float(value)
+
+
+def _check_file(name: str, value: Any) -> str | None:
+    if value is None:
+        return None
+    path = Path(value).expanduser()
+    if not path.is_file():
+        raise SlamSystemError(f"orbslam3: option {name}={str(value)!r}: file not found")
+    return str(path.resolve())
+
+
+class OrbSlam3(SlamSystem):
+    """ORB-SLAM3 in monocular, stereo or RGB-D mode (no IMU).
+
+    Args:
+        mode: ``mono``, ``stereo``, ``rgbd``, or ``None`` for the sequence's own sensor;
+            ``mono`` runs on the left image of a stereo or RGB-D sequence.
+        features: ``ORBextractor.nFeatures``, ORB features per image (50..100000).
+        scale_factor: ``ORBextractor.scaleFactor``, scale between pyramid levels (1 < s <= 4).
+        levels: ``ORBextractor.nLevels``, pyramid levels (1..20).
+        fast_threshold: ``ORBextractor.iniThFAST`` (grey levels, 1..255).
+        min_fast_threshold: ``ORBextractor.minThFAST`` (grey levels, 1..fast_threshold).
+        pace: ``True``: give frames at the sensor rate, as the upstream examples do (frame ``i``
+            no earlier than ``(t_i - t_{i-1})`` s after frame ``i-1`` was given; monocular loses
+            track at random without it); a number: the same at that speed factor (2.0 = twice
+            the rate); ``False``: as fast as ORB-SLAM3 tracks.
+        vocabulary: DBoW2 text vocabulary file; default
+            ``sal_wrappers.vocabulary.ensure_vocabulary()`` (built once, cached).
+        th_depth: ``Stereo.ThDepth``: close/far point threshold in baselines (stereo, RGB-D).
+        settings: a settings YAML to use as it is instead of the generated one.
+        keep_final: also save ORB-SLAM3's own final trajectory (``final_trajectory``).
+    """
+
+    name = "orbslam3"
+    sensors = ("mono", "stereo", "rgbd")
+    description = "ORB-SLAM3 (pyorbslam3 0.1.1): monocular, stereo or RGB-D visual SLAM, run in a child process"
+    version = 1
+
+    def __init__(
+        self,
+        *,
+        mode: str | None = None,
+        features: int = 2000,
+        scale_factor: float = 1.2,
+        levels: int = 8,
+        fast_threshold: int = 20,
+        min_fast_threshold: int = 7,
+        pace: bool | float = True,
+        vocabulary: str | Path | None = None,
+        th_depth: float = 40.0,
+        settings: str | Path | None = None,
+        keep_final: bool = True,
+    ):
+        if mode is not None and mode not in self.sensors:
+            raise SlamSystemError(f"orbslam3: option mode={mode!r} is not allowed; use one of {', '.join(self.sensors)} or None (the sequence's sensor)")
+        self.mode = mode
+        self.features = _check_int("features", features, 50, 100_000)
+        self.scale_factor = _check_real("scale_factor", scale_factor, 1.0, 4.0, "with 1 < scale_factor <= 4")
+        self.levels = _check_int("levels", levels, 1, 20)
+        self.fast_threshold = _check_int("fast_threshold", fast_threshold, 1, 255)
+        self.min_fast_threshold = _check_int("min_fast_threshold", min_fast_threshold, 1, self.fast_threshold)
+        if isinstance(pace, (bool, np.bool_)):
+            self.pace: bool | float = bool(pace)
+        else:
+            self.pace = _check_real("pace", pace, 0.0, 1000.0, "(speed factor, 0 < pace <= 1000), True or False")
+        self.vocabulary = _check_file("vocabulary", vocabulary)
+        self.th_depth = _check_real("th_depth", th_depth, 0.0, 1e6, "> 0 (baselines)")
+        self.settings = _check_file("settings", settings)
+        if not isinstance(keep_final, (bool, np.bool_)):
+            raise SlamSystemError(f"orbslam3: option keep_final={keep_final!r} is not allowed; use True or False")
+        self.keep_final = bool(keep_final)
+        if importlib.util.find_spec("pyorbslam3") is None:
+            raise SlamSystemError("orbslam3 needs the pyorbslam3 package: pip install 'pytest-sal[orbslam3]'")
+
+    def options(self) -> dict[str, Any]:
+        return {
+            "mode": self.mode,
+            "features": self.features,
+            "scale_factor": self.scale_factor,
+            "levels": self.levels,
+            "fast_threshold": self.fast_threshold,
+            "min_fast_threshold": self.min_fast_threshold,
+            "pace": self.pace,
+            "vocabulary": self.vocabulary,
+            "th_depth": self.th_depth,
+            "settings": self.settings,
+            "keep_final": self.keep_final,
+        }
+
+    @property
+    def pace_factor(self) -> float | None:
+        """Speed factor of the pacing (1.0: the sensor rate), ``None`` when not paced."""
+        if self.pace is False:
+            return None
+        return 1.0 if self.pace is True else float(self.pace)
+
+    def run(self, sequence: Sequence, workdir: Path, timeout: float | None = None) -> RunResult:
+        """Run ORB-SLAM3 on ``sequence`` in a child process (see the module text); files go to
+        ``workdir``: ``orbslam3_settings.yaml``, ``orbslam3.log``, ``final_trajectory_euroc.txt``.
+
+        ``timeout`` (s) covers the whole child run, vocabulary loading included. Raises
+        ``SlamSystemError`` when the sequence cannot run in the mode, and the vocabulary
+        module's error when the default vocabulary cannot be built; everything ORB-SLAM3 does
+        (exit, crash, hang, lost track) comes back in the result."""
+        mode = self.mode_for(sequence, self.mode)
+        workdir = Path(workdir)
+        workdir.mkdir(parents=True, exist_ok=True)
+        if self.vocabulary is not None:
+            vocabulary = self.vocabulary
+        else:
+            from sal_wrappers.vocabulary import ensure_vocabulary
+
+            vocabulary = str(ensure_vocabulary())
+        if self.settings is not None:
+            settings = self.settings
+        else:
+            params = OrbParameters(self.features, self.scale_factor, self.levels, self.fast_threshold, self.min_fast_threshold, self.th_depth)
+            settings = str(write_settings(workdir / "orbslam3_settings.yaml", sequence.camera, mode, sequence.fps, params))
+        final_path = workdir / "final_trajectory_euroc.txt"
+        final_path.unlink(missing_ok=True)
+        header = {
+            "vocabulary": vocabulary,
+            "settings": settings,
+            "sensor": mode,
+            "pace": self.pace_factor,
+            "final_path": str(final_path) if self.keep_final else None,
+        }
+        outcome = run_child("sal_wrappers.orbslam3:_track", header, _frames(sequence, mode), workdir, timeout, log_name="orbslam3.log")
+        return self._result(sequence, mode, outcome, header, final_path)
+
+    def _result(self, sequence: Sequence, mode: str, outcome: Any, header: dict[str, Any], final_path: Path) -> RunResult:
+        data = outcome.result or {}
+        timestamps = sequence.timestamps
+        n = len(timestamps)
+        reported: list[int] = [int(s) for s in data.get("raw_states", [])][:n]
+        raw: list[int | None] = [*reported, *([None] * (n - len(reported)))]
+        states = map_states(raw)
+        ids = segment_ids(raw)
+        poses = data.get("poses", [])
+        maps = int(ids.max()) + 1 if n and ids.max() >= 0 else 0
+        sizes = [int(np.count_nonzero(ids == k)) for k in range(maps)]
+        trajectory = None
+        if maps:
+            best = int(np.argmax(sizes))  # first of the largest
+            keep = np.flatnonzero(ids == best)
+            matrices = np.array([np.asarray(poses[i], dtype=np.float64).reshape(4, 4) for i in keep])
+            trajectory = Trajectory.from_matrices(timestamps[keep], matrices)
+        final, final_error = None, None
+        if self.keep_final and data.get("final_saved"):
+            try:
+                final = read_final_trajectory(final_path, timestamps)
+            except (OSError, ValueError) as exc:
+                final_error = str(exc)
+        phase = data.get("phase")
+        failure = outcome.failure
+        partial = failure is not None and bool(reported)
+        if failure is not None:
+            if phase in _PHASES:
+                failure += f" {_PHASES[phase]}"
+            if partial:
+                failure += f"; the per-frame results of {len(reported)} of {n} frames are kept"
+        track_times = np.asarray(data.get("track_times", []), dtype=np.float64)
+        counts: dict[str, int] = {}
+        for s in reported:
+            counts[_NAMES.get(s, str(s))] = counts.get(_NAMES.get(s, str(s)), 0) + 1
+        info: dict[str, Any] = {
+            "settings": header["settings"],
+            "settings_generated": self.settings is None,
+            "vocabulary": header["vocabulary"],
+            "features": self.features,
+            "pace": self.pace_factor,
+            "options": self.options(),
+            "load_time_s": data.get("load_time_s"),
+            "track_ms_mean": float(track_times.mean() * 1e3) if len(track_times) else None,
+            "track_ms_median": float(np.median(track_times) * 1e3) if len(track_times) else None,
+            "orbslam3_states": counts,
+            "segment_sizes": sizes,
+            "frames_reported": len(reported),
+            "phase": phase,
+            "partial": partial,
+            "final_path": str(final_path) if final is not None else None,
+        }
+        if final_error:
+            info["final_error"] = final_error
+        return RunResult(
+            system=self.name,
+            sequence=sequence.name,
+            sensor=mode,
+            timestamps=timestamps,
+            states=states,
+            trajectory=trajectory,
+            scored="online",
+            final_trajectory=final,
+            maps=maps,
+            wall_time_s=float(outcome.wall_time_s),
+            track_time_s=float(track_times.sum()) if len(track_times) else None,
+            exit_status=outcome.exit_status,
+            failure=failure,
+            log_path=outcome.log_path,
+            log_tail=outcome.log_tail,
+            info=info,
+        )
+
+
+def _grey(image: np.ndarray) -> np.ndarray:
+    import cv2
+
+    if image.ndim == 2:
+        return np.ascontiguousarray(image, dtype=np.uint8)
+    return cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)
+
+
+def _frames(sequence: Sequence, mode: str) -> Iterator[dict[str, Any]]:
+    """The messages for the child: time (s), grey left image, grey right image (stereo) and
+    float32 depth in metres with 0 where unknown (RGB-D)."""
+    for frame in sequence:
+        message: dict[str, Any] = {"timestamp": float(frame.timestamp), "image": _grey(frame.image)}
+        if mode == "stereo":
+            message["right"] = _grey(frame.right)
+        elif mode == "rgbd":
+            depth = np.asarray(frame.depth, dtype=np.float32)
+            message["depth"] = np.where(np.isfinite(depth) & (depth > 0), depth, np.float32(0.0))
+        yield message
+
+
+def _track(header: dict[str, Any], frames: Iterator[dict[str, Any]], result_path: Path) -> None:
+    """Child-process entry point: build ``pyorbslam3.Slam``, track every frame (paced), then
+    shut down and save the final trajectory; writes the per-frame records to ``result_path``
+    before each step that may crash."""
+    import pyorbslam3
+
+    record: dict[str, Any] = {"phase": "loading", "raw_states": [], "poses": [], "track_times": [], "points": [], "final_saved": False}
+    write_result(result_path, record)
+    start = time.perf_counter()
+    sensor = getattr(pyorbslam3.Sensor, _SENSORS[header["sensor"]])
+    slam = pyorbslam3.Slam(header["vocabulary"], header["settings"], sensor, use_viewer=False)
+    record["load_time_s"] = time.perf_counter() - start
+    record["phase"] = "tracking"
+    write_result(result_path, record)
+    pace = header.get("pace")
+    mode = header["sensor"]
+    previous: tuple[float, float] | None = None  # (frame time, wall time it was given)
+    last_flush = time.perf_counter()
+    for frame in frames:
+        t = float(frame["timestamp"])
+        if pace and previous is not None:
+            delay = previous[1] + (t - previous[0]) / pace - time.perf_counter()
+            if delay > 0:
+                time.sleep(delay)
+        given = time.perf_counter()
+        if mode == "stereo":
+            result = slam.track_stereo(frame["image"], frame["right"], t)
+        elif mode == "rgbd":
+            result = slam.track_rgbd(frame["image"], frame["depth"], t)
+        else:
+            result = slam.track_monocular(frame["image"], t)
+        record["track_times"].append(time.perf_counter() - given)
+        previous = (t, given)
+        state = int(result.state)
+        record["raw_states"].append(state)
+        record["poses"].append(np.asarray(result.pose_wc, dtype=np.float64).ravel().tolist() if state in _OK else None)
+        record["points"].append(int(result.num_tracked_points))
+        if time.perf_counter() - last_flush > _FLUSH_INTERVAL_S:
+            write_result(result_path, record)
+            last_flush = time.perf_counter()
+    record["phase"] = "shutdown"
+    write_result(result_path, record)
+    slam.shutdown()
+    final_path = header.get("final_path")
+    if final_path and any(s in _OK for s in record["raw_states"]):
+        record["phase"] = "saving"
+        write_result(result_path, record)
+        slam.save_trajectory_euroc(str(final_path))
+        record["final_saved"] = Path(final_path).is_file()
+    record["phase"] = "done"
+    write_result(result_path, record)
