@@ -27,7 +27,6 @@ import platform  # noqa: E402
 import time  # noqa: E402
 from collections.abc import Callable  # noqa: E402
 from dataclasses import replace  # noqa: E402
-from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
 import cv2  # noqa: E402
@@ -41,6 +40,8 @@ from sal_modules import (  # noqa: E402
     create,
 )
 from sal_modules.depth import NativeDepth, StereoDepth  # noqa: E402
+
+from results_file import write_section  # noqa: E402  (benchmarks/ is on sys.path when run as a script)
 
 #: Moderate settings of our modules (the work per frame, not the look, matters here).
 SETTINGS: dict[str, dict[str, Any]] = {
@@ -214,21 +215,7 @@ def main() -> None:
     )
     print(header + "\n\n" + result)
     if args.write:
-        write_section(header, result)
-
-
-BEGIN, END = "<!-- modules:begin -->", "<!-- modules:end -->"
-
-
-def write_section(header: str, result: str) -> None:
-    path = Path(__file__).with_name("RESULTS.md")
-    text = path.read_text()
-    section = f"{BEGIN}\n{header}\n\n{result}\n{END}"
-    if BEGIN in text:
-        text = text[: text.index(BEGIN)] + section + text[text.index(END) + len(END) :]
-    else:
-        text = text.rstrip() + "\n\n## Perturbation modules\n\n" + section + "\n"
-    path.write_text(text)
+        write_section("modules", "Perturbation modules", header + "\n\n" + result)
 
 
 if __name__ == "__main__":

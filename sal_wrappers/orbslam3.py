@@ -51,6 +51,7 @@ from sal_adapters import Sequence, Trajectory
 from sal_wrappers.base import RunResult, SlamSystem, SlamSystemError, TrackState
 from sal_wrappers.child import run_child, write_result
 from sal_wrappers.orbslam3_settings import OrbParameters, write_settings
+from sal_wrappers.prefetch import prefetched
 
 __all__ = ["ORB_STATES", "OrbSlam3", "map_states", "read_final_trajectory", "segment_ids"]
 
@@ -275,7 +276,7 @@ class OrbSlam3(SlamSystem):
             "pace": self.pace_factor,
             "final_path": str(final_path) if self.keep_final else None,
         }
-        outcome = run_child("sal_wrappers.orbslam3:_track", header, _frames(sequence, mode), workdir, timeout, log_name="orbslam3.log")
+        outcome = run_child("sal_wrappers.orbslam3:_track", header, prefetched(_frames(sequence, mode)), workdir, timeout, log_name="orbslam3.log")
         return self._result(sequence, mode, outcome, header, final_path)
 
     def _result(self, sequence: Sequence, mode: str, outcome: Any, header: dict[str, Any], final_path: Path) -> RunResult:

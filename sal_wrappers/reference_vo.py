@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import time
 import traceback
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -45,6 +46,7 @@ import numpy as np
 from sal_adapters import Sequence, Trajectory
 from sal_wrappers import vo_geometry as geo
 from sal_wrappers.base import RunResult, SlamSystem, SlamSystemError, TrackState
+from sal_wrappers.prefetch import prefetched
 from sal_wrappers.vo_odometry import Odometry
 
 __all__ = ["ReferenceVO"]
@@ -130,18 +132,15 @@ class ReferenceVO(SlamSystem):
                 )
             except Exception as exc:  # noqa: BLE001 - a failure of the system, reported in the result
                 failure = _failed(log, exc)
-            for pos in range(n) if failure is None else ():
+            # decoding errors are the caller's, not the system's: they raise
+            for pos, timestamp, image, right, depth in prefetched(_decoded(sequence, mode)) if failure is None else ():
                 if timeout is not None and time.monotonic() - start > timeout:
                     failure = f"timed out after {timeout:g} s"
                     log.write(f"# {failure} at frame {pos}\n")
                     break
-                frame = sequence[pos]  # decoding errors are the caller's, not the system's: they raise
-                image = frame.image
-                right = frame.right if mode == "stereo" else None
-                depth = frame.depth if mode == "rgbd" else None
                 t0 = time.perf_counter()
                 try:
-                    updates = odometry.step(pos, frame.timestamp, image, right, depth)
+                    updates = odometry.step(pos, timestamp, image, right, depth)
                 except Exception as exc:  # noqa: BLE001
                     failure = _failed(log, exc, pos)
                     break
@@ -190,6 +189,12 @@ class ReferenceVO(SlamSystem):
             log_tail="\n".join(lines[-15:]),
             info=info,
         )
+
+
+def _decoded(sequence: Sequence, mode: str) -> Iterator[tuple[int, float, np.ndarray, np.ndarray | None, np.ndarray | None]]:
+    """``(position, time, image, right, depth)`` per frame, with what ``mode`` needs."""
+    for pos, frame in enumerate(sequence):
+        yield pos, frame.timestamp, frame.image, frame.right if mode == "stereo" else None, frame.depth if mode == "rgbd" else None
 
 
 def _integer(option: str, value: Any, lo: int, hi: int) -> int:

@@ -140,7 +140,9 @@ class GroundPlane(DepthProvider):
     """KITTI has no depth: a flat road 1.65 m under the camera, nothing (0) above the horizon."""
 
     name = "ground_plane"
-    cached = False
+
+    def caches(self, stream: str) -> bool:
+        return False
 
     def unavailable(self, sequence: Sequence) -> str | None:
         return None

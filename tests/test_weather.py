@@ -398,7 +398,9 @@ class FlatWorldDepth(DepthProvider):
     (the KITTI excerpt is monocular: no stereo depth)."""
 
     name = "test_flat_world"
-    cached = False
+
+    def caches(self, stream: str) -> bool:
+        return False
 
     def unavailable(self, sequence: Sequence) -> str | None:
         return None

@@ -33,8 +33,10 @@ class DepthProvider(ABC):
     """
 
     name: ClassVar[str] = ""
-    #: Whether results are stored in the depth cache (native depth is read directly).
-    cached: ClassVar[bool] = True
+    def caches(self, stream: str) -> bool:
+        """Whether computed depth of ``stream`` is stored in the depth cache (worth it when
+        computing costs more than reading a ``.npy`` file back)."""
+        return True
 
     def settings(self) -> dict[str, Any]:
         """Everything that changes the computed depth (JSON types); part of the cache key."""
@@ -56,7 +58,7 @@ class DepthProvider(ABC):
         return hashlib.sha256(text.encode()).hexdigest()
 
     def lookup(self, sequence: Sequence, cache_dir: Path | None = None) -> DepthLookup:
-        """``depth(index, stream)`` for the frames of ``sequence``, cached when ``cached``."""
+        """``depth(index, stream)`` for the frames of ``sequence``, stored where ``caches``."""
         return CachedDepth(self, sequence, cache_dir)
 
     def __repr__(self) -> str:
@@ -95,7 +97,7 @@ class CachedDepth:
 
     def _load(self, index: int, stream: str) -> np.ndarray:
         position = self._positions[index]
-        if not self.provider.cached:
+        if not self.provider.caches(stream):
             return self.provider.compute(self.sequence, position, stream)
         path = self.folder / f"{index}_{stream}.npy"
         if path.is_file():

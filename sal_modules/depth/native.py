@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from sal_adapters.camera import Camera
@@ -16,7 +18,13 @@ class NativeDepth(DepthProvider):
     map re-projected into the right camera (``left_depth_to_right``)."""
 
     name = "native"
-    cached = False
+
+    def caches(self, stream: str) -> bool:
+        """The left map is read as it is; the re-projected right map is computed once and stored."""
+        return stream == "right"
+
+    def settings(self) -> dict[str, Any]:
+        return {"right_warp": 1}  # bumped when left_depth_to_right changes its output
 
     def unavailable(self, sequence: Sequence) -> str | None:
         if not sequence.records or any(r.depth is None for r in sequence.records):
@@ -46,10 +54,14 @@ def left_depth_to_right(depth: np.ndarray, camera: Camera) -> np.ndarray:
     z = depth.reshape(-1).astype(np.float32)
     sky = ~(z > 0)
     far = np.where(sky, np.inf, z)
-    ur = np.rint(u - np.where(sky, 0.0, camera.fx * camera.baseline_m / np.where(sky, 1.0, z))).astype(np.int64)
+    disparity = np.where(sky, 0.0, camera.fx * camera.baseline_m / np.where(sky, 1.0, z))
+    ur = np.rint(u - disparity).astype(np.int64)
     inside = (ur >= 0) & (ur < w)
-    v, ur, far = v[inside], ur[inside], far[inside]
-    order = np.argsort(-far, kind="stable")  # far first, so nearer points overwrite them
+    v, ur, far, disparity = v[inside], ur[inside], far[inside], disparity[inside]
+    # far first (small disparity), so nearer points overwrite them; a 16-bit key of 1/32 px
+    # steps lets numpy's stable sort use radix sort (linear time)
+    key = np.minimum(disparity * 32.0, 65535.0).astype(np.uint16)
+    order = np.argsort(key, kind="stable")
     out = np.full((h, w), np.nan, dtype=np.float32)
     out[v[order], ur[order]] = far[order]
     out = fill_unknown(out)
