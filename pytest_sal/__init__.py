@@ -1,7 +1,39 @@
-"""pytest-sal: SLAM robustness requirements as pytest tests."""
+"""pytest-sal: SLAM robustness requirements as pytest tests.
 
+>>> import pytest_sal as sal
+>>> from pytest_sal import ate_rmse, tracking_rate
+>>> from sal_modules import fog
+>>> @sal.require(ate_rmse < 1.5, fog.visibility_m >= 25)
+... def test_fog(sal_outcome):
+...     assert sal_outcome.boundary.fail_value < 25
+"""
+
+from pytest_sal.api import at, dataset_fixture, require, sweep
+from pytest_sal.requirements import (
+    InvalidRequirement,
+    Metric,
+    ate_rmse,
+    rpe_rot,
+    rpe_trans,
+    scale_error,
+    tracking_rate,
+)
 from sal_adapters.errors import SalError
 
-__all__ = ["SalError", "__version__"]
+__all__ = [
+    "InvalidRequirement",
+    "Metric",
+    "SalError",
+    "__version__",
+    "at",
+    "ate_rmse",
+    "dataset_fixture",
+    "require",
+    "rpe_rot",
+    "rpe_trans",
+    "scale_error",
+    "sweep",
+    "tracking_rate",
+]
 
 __version__ = "0.1.0"

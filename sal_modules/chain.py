@@ -22,6 +22,7 @@ import numpy as np
 from sal_modules.base import ModuleContext, Perturbation
 from sal_modules.errors import ParameterError
 from sal_modules.params import Param
+from sal_modules.refs import ParamRef
 
 __all__ = ["Composite"]
 
@@ -75,6 +76,20 @@ class Composite(Perturbation):
             valid = ", ".join(plain or list(known))
             raise ParameterError(f"composite {self.label()} has no parameter {address!r}; addresses: {valid}")
         return known[address]
+
+    def __getattr__(self, name: str) -> ParamRef:
+        """``(night() >> fog).visibility_m``: a child parameter by bare name, for bounds."""
+        if name.startswith("_") or "steps" not in self.__dict__:
+            raise AttributeError(name)
+        try:
+            _, spec = self.param(name)
+        except ParameterError as exc:
+            raise AttributeError(str(exc)) from None
+        return ParamRef(self, name, spec)
+
+    def ref(self, address: str) -> ParamRef:
+        """A child parameter by any address (``fog.visibility_m``, ``fog@1.visibility_m``)."""
+        return ParamRef(self, address, self.param(address)[1])
 
     @property
     def params(self) -> dict[str, Any]:

@@ -16,9 +16,12 @@ import math
 import numbers
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 from sal_modules.errors import ParameterError
+
+if TYPE_CHECKING:
+    from sal_modules.refs import Bound, ParamRef
 
 __all__ = ["Domain", "Worse", "SearchScale", "Param"]
 
@@ -117,6 +120,27 @@ class Param:
 
     def __set__(self, instance: Any, value: Any) -> None:
         raise AttributeError(f"{self.qualname} is read-only; use .with_params({self.name}=...) for a changed copy")
+
+    # -- bounds: ``fog.visibility_m >= 25`` (the requirement language reads them) -------------
+    def ref(self) -> ParamRef:
+        """This parameter of its module class as a ``ParamRef``."""
+        from sal_modules.refs import ParamRef
+
+        return ParamRef(self.owner, self.name, self)
+
+    def __ge__(self, value: Any) -> Bound:
+        return self.ref() >= value
+
+    def __gt__(self, value: Any) -> Bound:
+        return self.ref() > value
+
+    def __le__(self, value: Any) -> Bound:
+        return self.ref() <= value
+
+    def __lt__(self, value: Any) -> Bound:
+        return self.ref() < value
+
+    __hash__ = object.__hash__
 
     # -- description ---------------------------------------------------------------------------
     @property

@@ -84,7 +84,8 @@ def perturb(
         "depth": None if provider is None else {"provider": provider.name, "settings": provider.settings()},
     }
     content_key = "perturbed:" + hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()
-    return out.replace(records=records, name=f"{sequence.name}+{chain.label()}", content_key=content_key)
+    meta = dict(out.meta, perturbation=chain.to_dict())  # what was applied, for logs and test doubles
+    return out.replace(records=records, name=f"{sequence.name}+{chain.label()}", content_key=content_key, meta=meta)
 
 
 def as_grey(image: np.ndarray) -> np.ndarray:

@@ -1,0 +1,148 @@
+"""Decorators and helpers users write robustness tests with: ``sal.require``, ``sal.sweep``,
+``sal.at`` and ``sal.dataset_fixture``.
+
+>>> import pytest_sal as sal
+>>> from pytest_sal import ate_rmse
+>>> from sal_modules import fog
+>>> @sal.require(ate_rmse < 1.5, fog.visibility_m >= 25)
+... def test_fog(sal_outcome): ...
+>>> test_fog.sal_requirement.envelope.value
+25.0
+
+Each decorator validates what it is given when the test module is imported (so pytest reports
+misuse at collection) and attaches registered marks the plugin reads.
+"""
+
+from __future__ import annotations
+
+import numbers
+from collections.abc import Callable
+from typing import Any, TypeVar
+
+import pytest
+
+from pytest_sal.requirements import InvalidRequirement, Requirement
+from sal_modules.refs import ParamRef
+
+__all__ = ["at", "dataset_fixture", "require", "sweep"]
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def require(
+    *criteria_and_envelope: Any,
+    tolerance: float | None = None,
+    max_trials: int | None = None,
+    runs: int | None = None,
+    search_range: tuple[float, float] | None = None,
+    seed: int | None = None,
+) -> Callable[[F], F]:
+    """The system must meet every criterion wherever the envelope holds.
+
+    ``@sal.require(ate_rmse < 1.5, fog.visibility_m >= 25)`` makes the test one boundary search:
+    the envelope's edge (25 m) decides pass or fail, then bisection between the edge and the far
+    end of the search range locates the failure boundary within ``tolerance`` (parameter unit;
+    default: ini ``sal_tolerance`` percent of the edge) in at most ``max_trials`` trials of
+    ``runs`` runs each. Without an envelope, use it with ``sal.sweep`` or ``sal.at``.
+    """
+    options = {k: v for k, v in {"tolerance": tolerance, "max_trials": max_trials, "runs": runs, "search_range": search_range, "seed": seed}.items() if v is not None}
+    requirement = Requirement.build(criteria_and_envelope, **options)
+
+    def decorate(function: F) -> F:
+        if hasattr(function, "sal_requirement"):
+            raise InvalidRequirement(f"{function.__name__}: sal.require() is applied twice; give one requirement per test")
+        function.sal_requirement = requirement  # type: ignore[attr-defined]
+        marks = [pytest.mark.sal, pytest.mark.sal_require(requirement)]
+        if requirement.envelope is not None and not hasattr(function, "sal_levels"):
+            marks.append(pytest.mark.usefixtures("sal_outcome"))
+        for mark in marks:
+            function = mark(function)
+        return function
+
+    return decorate
+
+
+def sweep(param: Any, **levels: float) -> Callable[[F], F]:
+    """Run the test once per named severity level: ``@sal.sweep(rain.intensity_mm_h, L=3, M=10)``
+    gives items ``[rain.intensity_mm_h=3]``, ``[rain.intensity_mm_h=10]``; the ``sal_trial``
+    fixture holds that level's trial (metrics, verdict). Put it above ``@sal.require``."""
+    ref = _ref(param, "sal.sweep")
+    if not levels:
+        raise InvalidRequirement(f"sal.sweep({ref.label}) needs named levels, e.g. sal.sweep({ref.label}, L=3, M=10, H=50)")
+    for name, value in levels.items():
+        _check_value(ref, value, f"sal.sweep level {name}")
+
+    def decorate(function: F) -> F:
+        function.sal_levels = (ref, dict(levels))  # type: ignore[attr-defined]
+        return pytest.mark.sal(pytest.mark.sal_sweep(ref, dict(levels))(function))
+
+    return decorate
+
+
+def at(param: Any = None, value: float | None = None, **by_address: float) -> Callable[[F], F]:
+    """Run the test at one explicit point: ``@sal.at(fog.visibility_m, 30)`` (or
+    ``@sal.at(**{"fog.visibility_m": 30})``); ``sal_trial`` holds the trial. Explicit points
+    always run, like hypothesis' ``@example``."""
+    if param is None:
+        if len(by_address) != 1:
+            raise InvalidRequirement('sal.at() takes one parameter and value: sal.at(fog.visibility_m, 30) or sal.at(**{"fog.visibility_m": 30})')
+        ((address, value),) = by_address.items()
+        param = _resolve(address)
+    ref = _ref(param, "sal.at")
+    if value is None:
+        raise InvalidRequirement(f"sal.at({ref.label}) needs a value in {ref.unit or 'its unit'}, e.g. sal.at({ref.label}, {ref.param.default!r})")
+    _check_value(ref, value, "sal.at")
+
+    def decorate(function: F) -> F:
+        function.sal_levels = (ref, {"at": float(value)})  # type: ignore[attr-defined]
+        return pytest.mark.sal(pytest.mark.sal_sweep(ref, {"at": float(value)})(function))
+
+    return decorate
+
+
+def dataset_fixture(kind: str, path: str | None = None, *, scope: str = "session", **options: Any) -> Any:
+    """A ``sal_dataset`` fixture for a real dataset, to assign in ``conftest.py``::
+
+        sal_dataset = sal.dataset_fixture("kitti", "/data/kitti", sequence="07", max_frames=200)
+
+    The dataset is opened once per session; a missing folder is one clear error naming it.
+    """
+
+    @pytest.fixture(scope=scope)  # type: ignore[call-overload]
+    def sal_dataset() -> Any:
+        from sal_adapters import open_dataset
+
+        return open_dataset(kind, path, **options)
+
+    return sal_dataset
+
+
+def _ref(param: Any, where: str) -> ParamRef:
+    if isinstance(param, ParamRef):
+        ref = param
+    elif hasattr(param, "ref") and hasattr(param, "qualname"):  # a Param on a module class
+        ref = param.ref()
+    else:
+        raise InvalidRequirement(f"{where}() takes a searchable parameter such as fog.visibility_m, got {param!r}")
+    if not ref.param.searchable:
+        raise InvalidRequirement(f"{where}({ref.label}): the parameter is not searchable; pick one that `sal modules` lists as searchable")
+    return ref
+
+
+def _check_value(ref: ParamRef, value: Any, where: str) -> None:
+    if not isinstance(value, numbers.Real) or isinstance(value, bool):
+        raise InvalidRequirement(f"{where}: {ref.label} needs a number in {ref.unit or 'its unit'}, got {value!r}")
+    scale = ref.param.search_space()
+    if not scale.min <= float(value) <= scale.max:
+        raise InvalidRequirement(f"{where}: {ref.label} = {value!r} is outside {scale.min:g} .. {scale.max:g} {scale.unit}".rstrip())
+
+
+def _resolve(address: str) -> ParamRef:
+    from sal_modules import module_class
+
+    module, _, name = address.partition(".")
+    try:
+        param = module_class(module).parameters()[name]
+    except Exception as exc:  # noqa: BLE001 - re-raised as a requirement error naming the address
+        raise InvalidRequirement(f"sal.at(): no parameter {address!r} ({exc})") from None
+    return param.ref()

@@ -1,0 +1,130 @@
+"""Boundary search (pure) and the requirement language."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from pytest_sal import InvalidRequirement, ate_rmse, tracking_rate
+from pytest_sal.requirements import Requirement
+from pytest_sal.search import SearchSpace, boundary_search
+from sal_modules import fog, frame_drop, night, rain
+
+FOG = SearchSpace(mild=100_000.0, severe=1.0)  # visibility gets worse when lower
+
+
+def threshold_system(boundary: float, worse_lower: bool = True):
+    """Passes exactly on the mild side of ``boundary``; records what it was asked."""
+    asked: list[float] = []
+
+    def evaluate(value: float) -> tuple[bool, None]:
+        asked.append(value)
+        return (value >= boundary if worse_lower else value <= boundary), None
+
+    return evaluate, asked
+
+
+def test_edge_first_then_bisect_to_tolerance() -> None:
+    evaluate, asked = threshold_system(14.3)
+    result = boundary_search(evaluate, FOG, edge=25, tolerance=2, max_trials=10)
+    assert asked[0] == 25 and result.edge_passed
+    assert result.termination == "tolerance"
+    assert result.fail_value < 14.3 <= result.pass_value and result.pass_value - result.fail_value <= 2
+    assert not result.contradictions and not result.flaky
+
+
+def test_a_failing_edge_bisects_toward_the_mild_end() -> None:
+    evaluate, asked = threshold_system(40.0)
+    result = boundary_search(evaluate, SearchSpace(mild=200.0, severe=1.0), edge=25, tolerance=2, max_trials=12)
+    assert not result.edge_passed and asked[1] == 200.0  # the far end on the mild side
+    assert result.fail_value < 40.0 <= result.pass_value and result.termination == "tolerance"
+
+
+def test_not_bracketed_when_the_far_end_agrees_with_the_edge() -> None:
+    result = boundary_search(lambda v: (True, None), FOG, edge=25, tolerance=2)
+    assert result.termination == "not_bracketed" and result.pass_value == 1.0 and result.fail_value is None
+    result = boundary_search(lambda v: (False, None), FOG, edge=25, tolerance=2)
+    assert result.termination == "not_bracketed" and result.fail_value == 100_000.0 and result.pass_value is None
+
+
+def test_max_trials_stops_the_search_with_the_bracket_so_far() -> None:
+    evaluate, asked = threshold_system(14.3)
+    result = boundary_search(evaluate, FOG, edge=25, tolerance=0.01, max_trials=4)
+    assert len(asked) == 4 and result.termination == "max_trials"
+    assert result.fail_value < 14.3 <= result.pass_value
+
+
+def test_integer_domain_stops_at_neighbours() -> None:
+    evaluate, _ = threshold_system(37, worse_lower=False)
+    result = boundary_search(evaluate, SearchSpace(mild=0, severe=100, domain="integer"), edge=20, tolerance=0.5, max_trials=20)
+    assert (result.pass_value, result.fail_value) == (37, 38) and result.termination == "domain_resolution"
+    assert all(float(t.value).is_integer() for t in result.trials)
+
+
+def test_warm_start_needs_three_trials_when_nothing_changed() -> None:
+    evaluate, _ = threshold_system(14.3)
+    first = boundary_search(evaluate, FOG, edge=25, tolerance=2, max_trials=10)
+    evaluate, asked = threshold_system(14.3)
+    again = boundary_search(evaluate, FOG, edge=25, tolerance=2, max_trials=10, warm_start=(first.pass_value, first.fail_value))
+    assert len(asked) == 3 and (again.pass_value, again.fail_value) == (first.pass_value, first.fail_value)
+    assert len(first.trials) >= 6  # the cold search needed twice as many
+
+
+def test_geometric_bisection_over_decades() -> None:
+    evaluate, asked = threshold_system(500.0)
+    boundary_search(evaluate, FOG, edge=25, tolerance=1, max_trials=3)
+    # edge fails, the mild end passes, the next try is the geometric mean, not 50012 m
+    assert asked == [25, 100_000.0, pytest.approx(math.sqrt(25 * 100_000.0))]
+
+
+def test_contradictions_are_reported() -> None:
+    # passes at 25 m and (oddly) at 10 m, fails at 15 m: the warm start visits both
+    result = boundary_search(lambda v: (v >= 20 or v == 10, None), FOG, edge=25, tolerance=2, max_trials=6, warm_start=(10.0, 15.0))
+    assert "10 passed but the milder 15 failed" in result.contradictions
+
+
+def test_an_edge_near_the_threshold_is_repeated_and_disagreement_is_flaky() -> None:
+    verdicts = iter([True, False, True, True, True, True, True, True])
+    result = boundary_search(lambda v: (next(verdicts), "near"), FOG, edge=25, tolerance=2, recheck_edge=lambda info: info == "near")
+    assert result.flaky and result.trials[1].repeat and result.trials[1].value == 25
+
+
+# -- the requirement language ------------------------------------------------------------------
+def test_requirement_reads_like_its_source() -> None:
+    req = Requirement.build([ate_rmse < 1.5, tracking_rate >= 0.9, fog.visibility_m >= 25])
+    assert str(req) == "ate_rmse < 1.5 m and tracking_rate >= 0.9 wherever fog.visibility_m >= 25 m"
+    assert req.holds({"ate_rmse": 1.2, "tracking_rate": 0.95})
+    assert not req.holds({"ate_rmse": 1.2, "tracking_rate": None})  # a missing metric fails
+    assert [str(c) for c in req.failed({"ate_rmse": 2.0, "tracking_rate": 0.95})] == ["ate_rmse < 1.5 m"]
+
+
+def test_chain_parameters_and_percent_search_units() -> None:
+    bound = (night() >> fog).visibility_m >= 40
+    assert str(bound) == "(night>>fog).visibility_m >= 40 m"
+    chain = bound.ref.module(30.0)
+    assert chain.steps[1].visibility_m == 30.0 and chain.steps[0].name == "night"
+    assert str(frame_drop.drop_rate <= 30) == "frame_drop.drop_rate <= 30 %"
+
+
+@pytest.mark.parametrize(
+    ("items", "message"),
+    [
+        ([ate_rmse < 1.5, fog.visibility_m <= 25], "write fog.visibility_m >= 25"),
+        ([ate_rmse < 1.5, fog.heterogeneity >= 0.1], "fog.heterogeneity is not searchable"),
+        ([ate_rmse < 1.5, fog.visibility_m >= 25, rain.intensity_mm_h <= 5], "searches one parameter; got 2 envelopes"),
+        ([fog.visibility_m >= 25], "needs at least one metric criterion"),
+        ([ate_rmse, fog.visibility_m >= 25], "ate_rmse alone is not a criterion"),
+        ([ate_rmse < 1.5, fog.visibility_m >= 0.5], "visibility_m = 0.5 m is not valid"),
+    ],
+)
+def test_misuse_says_what_to_write_instead(items, message: str) -> None:
+    with pytest.raises(InvalidRequirement, match=message.replace("(", r"\(").replace(")", r"\)")):
+        Requirement.build(items)
+
+
+def test_comparing_with_a_string_is_an_error_naming_the_unit() -> None:
+    with pytest.raises(InvalidRequirement, match=r"ate_rmse < '1.5': compare a metric with a finite number in m"):
+        ate_rmse < "1.5"  # noqa: B015
+    with pytest.raises(TypeError, match=r"compare a parameter with a number in m"):
+        fog.visibility_m >= "25"  # noqa: B015
