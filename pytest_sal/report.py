@@ -1,0 +1,418 @@
+"""Reports over robustness outcomes: a terminal table, a Markdown summary for CI, an HTML page.
+
+Pure functions over a list of ``Outcome`` (no pytest here):
+
+* ``summary_rows`` / ``terminal_table``: one row per test (short node id, system, parameter,
+  the envelope, the boundary interval, trials, margin, change against the history, verdict).
+* ``markdown_report`` / ``write_markdown``: headline counts, the table, and details (metrics at
+  both ends of the bracket, the trials, contradictions, the reproduction line) for every test
+  that failed, was flaky or regressed; GitHub-flavoured, for a CI job summary.
+* ``write_html_report`` / ``metric_plot`` (in ``pytest_sal.report_html``): one self-contained
+  page with a metric-against-parameter plot per test, the trials and the example frames.
+
+Signs: ``margin`` and ``change`` count towards the severe side of the parameter, so ``+`` means
+the system copes with more than the requirement asks (margin) or than it did before (change).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import tempfile
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+from pytest_sal.outcome import Boundary, Outcome, Trial
+from pytest_sal.requirements import METRICS
+
+__all__ = [
+    "COLUMNS",
+    "criteria_of",
+    "envelope_text",
+    "headline",
+    "markdown_report",
+    "metric_plot",
+    "short_id",
+    "status",
+    "summary_rows",
+    "terminal_table",
+    "write_html_report",
+    "write_markdown",
+]
+
+#: Table columns: (key in ``summary_rows``, header, alignment ``<``/``>``).
+COLUMNS: tuple[tuple[str, str, str], ...] = (
+    ("test", "test", "<"),
+    ("system", "system", "<"),
+    ("parameter", "parameter", "<"),
+    ("requirement", "requirement", "<"),
+    ("boundary", "boundary", "<"),
+    ("trials", "trials", ">"),
+    ("margin", "margin", ">"),
+    ("change", "change", ">"),
+    ("verdict", "verdict", "<"),
+)
+#: Narrowest a column is squeezed to when the table is too wide, in turn: the first step
+#: narrows all these columns together, the later ones (from where the step before left them)
+#: the test id further, then parameter and system, then all (unlisted columns keep their width).
+_MIN_WIDTHS: tuple[dict[str, int], ...] = (
+    {"test": 24, "system": 8, "parameter": 16, "requirement": 11, "boundary": 14},
+    {"test": 16, "system": 8, "parameter": 16, "requirement": 11, "boundary": 14},
+    {"test": 16, "system": 6, "parameter": 12, "requirement": 11, "boundary": 14},
+    {"test": 12, "system": 5, "parameter": 8, "requirement": 8, "boundary": 10},
+)
+#: How much of the narrowing each column takes (relative).
+_SHARE = {"test": 3.0, "parameter": 1.5, "boundary": 1.5, "system": 1.0, "requirement": 1.0}
+#: Columns left out, in turn, when the table cannot be narrowed enough.
+_DROP_ORDER = ("system", "change", "requirement", "parameter")
+#: Columns whose end says most (test ids, ``(night>>fog).visibility_m``) lose their left end.
+_LEFT_TRUNCATED = ("test", "parameter")
+_SEP = "  "
+ELLIPSIS = "…"
+#: Metrics shown in the trials tables, in order (others go to the details only through criteria).
+TRIAL_METRICS = ("ate_rmse", "tracking_rate")
+_VERDICT_TEXT = {"passed": "passed", "failed": "FAILED", "flaky": "FLAKY", "regressed": "FAILED"}
+_CRITERION = re.compile(r"\b(" + "|".join(map(re.escape, METRICS)) + r")\s*(<=|>=|<|>)\s*([-+]?[0-9.]+(?:e[-+]?[0-9]+)?)")
+
+
+# ---------------------------------------------------------------- pieces of text
+
+
+def status(outcome: Outcome) -> str:
+    """``passed``, ``failed``, ``flaky`` or ``regressed`` (a regression outranks the verdict)."""
+    return "regressed" if outcome.regression is not None else outcome.verdict
+
+
+def short_id(test_id: str) -> str:
+    """The node id without the test file's folders: ``test_fog.py::test_visibility[orbslam3]``."""
+    path, sep, rest = test_id.partition("::")
+    return path.rsplit("/", 1)[-1] + sep + rest
+
+
+def truncate_left(text: str, width: int) -> str:
+    return text if len(text) <= width else ELLIPSIS + text[len(text) - width + 1 :] if width > 1 else text[-width:]
+
+
+def truncate_right(text: str, width: int) -> str:
+    return text if len(text) <= width else text[: width - 1] + ELLIPSIS if width > 1 else text[:width]
+
+
+def num(value: float | None) -> str:
+    return "-" if value is None else f"{value:.4g}"
+
+
+def with_unit(value: float | None, unit: str) -> str:
+    return "-" if value is None else f"{value:.4g}{' ' + unit if unit else ''}"
+
+
+def signed(value: float | None, unit: str) -> str:
+    """``+1.2 m``, ``-3 %``, ``±0 m``; ``-`` when unknown."""
+    if value is None:
+        return "-"
+    text = "±0" if abs(value) < 1e-12 else f"{value:+.3g}"
+    return f"{text} {unit}" if unit else text
+
+
+def metric_text(name: str, value: Any) -> str:
+    """A metric value with its unit (``0.412 m``); ``-`` when missing."""
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "-"
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return str(value)
+    unit = METRICS[name].unit if name in METRICS else ""
+    return f"{value:.3g}{' ' + unit if unit else ''}"
+
+
+def envelope_text(outcome: Outcome) -> str:
+    """The envelope of the requirement without the parameter: ``>= 25 m``; ``-`` without one."""
+    marker = f" wherever {outcome.parameter} "
+    if outcome.parameter and marker in outcome.requirement:
+        return outcome.requirement.split(marker, 1)[1].strip()
+    if outcome.edge is None:
+        return "-"
+    op = ">=" if outcome.worse == "lower" else "<="
+    return f"{op} {with_unit(outcome.edge, outcome.boundary.unit)}"
+
+
+def criteria_of(outcome: Outcome) -> list[tuple[str, str, float]]:
+    """The pass criteria of the requirement, as ``(metric, op, threshold)`` (read from its text)."""
+    text = outcome.requirement.split(" wherever ", 1)[0]
+    return [(m.group(1), m.group(2), float(m.group(3))) for m in _CRITERION.finditer(text)]
+
+
+def boundary_cell(outcome: Outcome) -> str:
+    """Compact boundary: ``14-16 m``, ``< 1 m (never failed)``, ``> 1e+05 m (never passed)``;
+    ``passed at 3 px`` for a single point."""
+    b, unit = outcome.boundary, outcome.boundary.unit
+    if (b.pass_value is None) == (b.fail_value is None):
+        return b.text()
+    if outcome.termination == "single":  # one level of a sweep, or an explicit point
+        return f"passed at {with_unit(b.pass_value, unit)}" if b.pass_value is not None else f"failed at {with_unit(b.fail_value, unit)}"
+    severe_below = outcome.worse == "lower"  # the severe side is below the passing values
+    if b.pass_value is not None:
+        return f"{'<' if severe_below else '>'} {with_unit(b.pass_value, unit)} (never failed)"
+    return f"{'>' if severe_below else '<'} {with_unit(b.fail_value, unit)} (never passed)"
+
+
+def boundary_shift(outcome: Outcome) -> float | None:
+    """How far the boundary moved since ``previous``, towards the severe side (``+``: more robust).
+    Midpoints when both are bracketed, else the pass ends, else the fail ends; ``None`` otherwise."""
+    prev, cur = outcome.previous, outcome.boundary
+    if prev is None:
+        return None
+    pairs = ((_midpoint(prev), _midpoint(cur)), (prev.pass_value, cur.pass_value), (prev.fail_value, cur.fail_value))
+    for before, after in pairs:
+        if before is not None and after is not None:
+            delta = after - before
+            return -delta if outcome.worse == "lower" else delta
+    return None
+
+
+def change_cell(outcome: Outcome) -> str:
+    if outcome.regression is not None:
+        return "REGRESSED"
+    if outcome.previous is None:
+        return "-"
+    shift = boundary_shift(outcome)
+    return "changed" if shift is None else signed(shift, outcome.boundary.unit)
+
+
+def trials_cell(outcome: Outcome) -> str:
+    cached = outcome.cached_trials
+    return f"{len(outcome.trials)} ({cached} cached)" if cached else str(len(outcome.trials))
+
+
+def headline(outcomes: Sequence[Outcome]) -> str:
+    """``3 robustness requirements: 2 passed, 1 failed`` (regressed and flaky counted apart)."""
+    n = len(outcomes)
+    passed = sum(o.passed for o in outcomes)
+    flaky = sum(status(o) == "flaky" for o in outcomes)
+    regressed = sum(status(o) == "regressed" for o in outcomes)
+    failed = n - passed - flaky
+    parts = [f"{passed} passed", f"{failed} failed" + (f" ({regressed} regressed)" if regressed else "")]
+    if flaky:
+        parts.append(f"{flaky} flaky")
+    noun = "robustness requirement" if n == 1 else "robustness requirements"
+    return f"{n} {noun}: {', '.join(parts)}"
+
+
+def bracket_trials(outcome: Outcome) -> tuple[Trial | None, Trial | None]:
+    """The trials at the boundary's pass end and fail end (the first such trial that is not a
+    repeat, else a repeat), or ``None``."""
+
+    def at(value: float | None, passed: bool) -> Trial | None:
+        if value is None:
+            return None
+        found = [t for t in outcome.trials if t.passed == passed and math.isclose(t.value, value, rel_tol=1e-9, abs_tol=1e-12)]
+        return next((t for t in found if not t.repeat), found[0] if found else None)
+
+    return at(outcome.boundary.pass_value, True), at(outcome.boundary.fail_value, False)
+
+
+def trial_metric_names(outcome: Outcome) -> list[str]:
+    """Metrics for a trials table: ``TRIAL_METRICS`` and those of the criteria, in that order."""
+    names = list(TRIAL_METRICS)
+    names += [name for name, _, _ in criteria_of(outcome) if name not in names]
+    return names
+
+
+def needs_details(outcome: Outcome) -> bool:
+    return status(outcome) in ("failed", "flaky", "regressed")
+
+
+def _midpoint(b: Boundary) -> float | None:
+    return None if b.pass_value is None or b.fail_value is None else (b.pass_value + b.fail_value) / 2
+
+
+# ---------------------------------------------------------------- table
+
+
+def summary_rows(outcomes: Iterable[Outcome]) -> list[dict[str, str]]:
+    """One dict of display strings per outcome, keyed by ``COLUMNS`` keys, with ``test_id`` (the
+    full node id) and ``status`` (``passed``/``failed``/``flaky``/``regressed``) besides."""
+    rows = []
+    for o in outcomes:
+        rows.append(
+            {
+                "test": short_id(o.test_id),
+                "system": o.system,
+                "parameter": o.parameter or "-",
+                "requirement": envelope_text(o),
+                "boundary": boundary_cell(o),
+                "trials": trials_cell(o),
+                "margin": signed(o.margin, o.boundary.unit),
+                "change": change_cell(o),
+                "verdict": _VERDICT_TEXT.get(status(o), status(o)),
+                "test_id": o.test_id,
+                "status": status(o),
+            }
+        )
+    return rows
+
+
+def terminal_table(outcomes: Iterable[Outcome], width: int = 120) -> list[str]:
+    """The summary as lines of at most ``width`` characters (header, rule, one line per test).
+
+    Columns fit their contents. When that is too wide, test ids lose their file, then the
+    test, parameter, boundary, system and requirement columns give way, the test id most
+    (marked ``…``: test ids and parameters lose their left end, the others their right end);
+    when even their narrowest is too wide, the system, change, requirement and parameter
+    columns are left out, in that order."""
+    rows = summary_rows(outcomes)
+    natural = {key: max([len(header)] + [len(r[key]) for r in rows]) for key, header, _ in COLUMNS}
+    if sum(natural.values()) + len(_SEP) * (len(COLUMNS) - 1) > width:  # the tests' names say more than their files
+        rows = [{**r, "test": r["test"].split("::", 1)[-1]} for r in rows]
+        natural["test"] = max([len("test")] + [len(r["test"]) for r in rows])
+    columns, widths = list(COLUMNS), dict(natural)
+    for drop in (None, *_DROP_ORDER):
+        columns = [c for c in columns if c[0] != drop]
+        widths = {key: natural[key] for key, _, _ in columns}
+        if any(_shrink(widths, mins, width - len(_SEP) * (len(columns) - 1)) for mins in _MIN_WIDTHS):
+            break
+
+    def line(cells: dict[str, str], header: bool = False) -> str:
+        out = []
+        for key, _, align in columns:
+            text, w = cells[key], widths[key]
+            text = truncate_left(text, w) if key in _LEFT_TRUNCATED and not header else truncate_right(text, w)
+            out.append(f"{text:{align}{w}}")
+        return _SEP.join(out).rstrip()
+
+    lines = [line({key: header for key, header, _ in columns}, header=True)]
+    lines.append(_SEP.join("-" * widths[key] for key, _, _ in columns))
+    lines += [line(r) for r in rows]
+    return [text[:width] for text in lines]
+
+
+def _shrink(widths: dict[str, int], mins: dict[str, int], total: int) -> bool:
+    """Narrow the columns in ``mins`` (not below it), each by its share of what is over its
+    minimum, until the widths sum to ``total``; whether they do."""
+    excess = sum(widths.values()) - total
+    while excess > 0:
+        room = {k: (widths[k] - m) / _SHARE[k] for k, m in mins.items() if k in widths and widths[k] > m}
+        if not room:
+            return False
+        widths[max(room, key=lambda k: room[k])] -= 1
+        excess -= 1
+    return True
+
+
+# ---------------------------------------------------------------- Markdown
+
+_MD_SPECIAL = re.compile(r"([\\`*_\[\]<>|#~!])")
+
+
+def md(text: str) -> str:
+    """Plain Markdown text: punctuation that could format or form HTML is backslash-escaped."""
+    return _MD_SPECIAL.sub(r"\\\1", str(text).replace("&", "&amp;")).replace("\n", " ")
+
+
+def md_code(text: str) -> str:
+    """An inline code span (safe in a table: ``|`` escaped) holding ``text`` literally."""
+    text = str(text).replace("\n", " ").replace("|", "\\|")
+    fence = "`" * (max((len(m) for m in re.findall(r"`+", text)), default=0) + 1)
+    pad = " " if text.startswith("`") or text.endswith("`") else ""
+    return f"{fence}{pad}{text}{pad}{fence}"
+
+
+def _md_table(header: Sequence[str], rows: Iterable[Sequence[str]], align: Sequence[str]) -> list[str]:
+    rule = ["---:" if a == ">" else "---" for a in align]
+    return ["| " + " | ".join(r) + " |" for r in [list(header), rule, *map(list, rows)]]
+
+
+def markdown_report(outcomes: Iterable[Outcome], *, title: str = "Robustness") -> str:
+    """GitHub-flavoured Markdown: headline counts, the summary table, then a section for each
+    test that failed, was flaky or regressed."""
+    outcomes = list(outcomes)
+    lines = [f"## {md(title)}", "", f"**{md(headline(outcomes))}**", ""]
+    if outcomes:
+        rows = summary_rows(outcomes)
+        cells = [[md_code(r["test"]) if key == "test" else md(r[key]) for key, _, _ in COLUMNS] for r in rows]
+        lines += _md_table([h for _, h, _ in COLUMNS], cells, [a for _, _, a in COLUMNS])
+        lines += ["", "_margin and change: + towards the severe side (the system copes with more)_"]
+    for o in outcomes:
+        if needs_details(o):
+            lines += ["", *_md_details(o)]
+    return "\n".join(lines).rstrip() + "\n"
+
+
+def _md_details(o: Outcome) -> list[str]:
+    unit = o.boundary.unit
+    lines = [f"### {status(o).upper()}: {md_code(o.test_id)}", ""]
+    lines.append(f"- **requirement**: {md_code(o.requirement)}")
+    lines.append(f"- **system**: {md(o.system)}; **dataset**: {md(o.dataset)}")
+    lines.append(f"- **boundary**: {md(o.boundary.text())}; **margin**: {md(signed(o.margin, unit))}")
+    lines.append(f"- **search**: {len(o.trials)} trials ({o.cached_trials} cached), stopped: {md(o.termination)}")
+    if o.previous is not None:
+        lines.append(f"- **previous boundary**: {md(o.previous.text())}; **change**: {md(change_cell(o))}")
+    if o.regression:
+        lines.append(f"- **regression**: {md(o.regression)}")
+    pass_trial, fail_trial = bracket_trials(o)
+    for label, trial in (("last pass", pass_trial), ("first fail", fail_trial)):
+        if trial is not None:
+            lines.append(f"- **{label}** at {md(with_unit(trial.value, unit))}: {md(_metrics_summary(o, trial))}")
+    if o.trials:
+        names = trial_metric_names(o)
+        header = ["#", f"value [{unit}]" if unit else "value", "verdict", *names, "cached", "failed criteria"]
+        rows = [
+            [str(i), num(t.value), _trial_verdict(t), *(metric_text(n, t.metrics.get(n)) for n in names), "yes" if t.cached else "", "; ".join(t.failed)]
+            for i, t in enumerate(o.trials, 1)
+        ]
+        align = ["<", ">", "<", *[">"] * len(names), "<", "<"]
+        lines += ["", *_md_table([md(h) for h in header], [[md(c) for c in r] for r in rows], align)]
+    if o.contradictions:
+        lines += ["", "**contradictions** (a pass more severe than a fail):", ""]
+        lines += [f"- {md(c)}" for c in o.contradictions]
+    if o.reproduction:
+        lines += ["", f"reproduce: {md_code(o.reproduction)}"]
+    return lines
+
+
+def _trial_verdict(t: Trial) -> str:
+    return ("pass" if t.passed else "fail") + (" (repeat)" if t.repeat else "")
+
+
+def _metrics_summary(o: Outcome, t: Trial) -> str:
+    text = ", ".join(f"{n} {metric_text(n, t.metrics.get(n))}" for n in trial_metric_names(o))
+    return text + (f" (failed: {'; '.join(t.failed)})" if t.failed else "")
+
+
+def write_markdown(outcomes: Iterable[Outcome], path: str | Path, *, title: str = "Robustness") -> Path:
+    """Write ``markdown_report`` to ``path`` atomically; return the path."""
+    return write_text_atomic(path, markdown_report(outcomes, title=title))
+
+
+def write_text_atomic(path: str | Path, text: str) -> Path:
+    """Write ``text`` (UTF-8) through a temporary file in the same folder and ``os.replace``."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as handle:
+            handle.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+# ---------------------------------------------------------------- HTML (pytest_sal.report_html)
+
+
+def write_html_report(outcomes: Iterable[Outcome], directory: str | Path, *, title: str = "Robustness report") -> Path:
+    """Write the self-contained HTML report (``index.html``, plots and copied frames) into
+    ``directory``; return the path of ``index.html``. See ``pytest_sal.report_html``."""
+    from pytest_sal import report_html
+
+    return report_html.write_html_report(outcomes, directory, title=title)
+
+
+def metric_plot(outcome: Outcome, path: str | Path) -> Path:
+    """Write the metric-against-parameter plot of ``outcome`` as a PNG; return the path.
+    See ``pytest_sal.report_html.metric_plot``."""
+    from pytest_sal import report_html
+
+    return report_html.metric_plot(outcome, path)

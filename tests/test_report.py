@@ -1,0 +1,291 @@
+"""Reports over outcomes: the terminal table, the Markdown summary and the HTML page."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from pytest_sal.outcome import Boundary, Outcome, Trial
+from pytest_sal.report import (
+    headline,
+    markdown_report,
+    metric_plot,
+    summary_rows,
+    terminal_table,
+    write_html_report,
+    write_markdown,
+)
+from pytest_sal.report_html import metric_figure
+
+FOG_REQ = "ate_rmse < 1.5 m and tracking_rate >= 0.9 wherever fog.visibility_m >= 25 m"
+XSS_ID = "tests/robustness/test_weather.py::test_rain[<script>alert(1)</script>]"
+
+
+def m(ate: float | None, rate: float | None) -> dict[str, float | None]:
+    return {"ate_rmse": ate, "tracking_rate": rate, "rpe_trans": None, "rpe_rot": None, "scale_error": None}
+
+
+def fog(artifacts_dir: Path | None = None) -> Outcome:
+    """Passed: edge 25 m passes, geometric bisection towards 1 m, boundary 13.7-15.1 m, all cached."""
+    trials = [
+        Trial(25.0, True, m(0.21, 0.99), cached=True, wall_time_s=0.01),
+        Trial(5.0, False, m(4.8, 0.41), cached=True, failed=["ate_rmse < 1.5 m", "tracking_rate >= 0.9"]),
+        Trial(11.18, False, m(2.1, 0.84), cached=True, failed=["ate_rmse < 1.5 m", "tracking_rate >= 0.9"]),
+        Trial(16.72, True, m(0.44, 0.97), cached=True),
+        Trial(13.67, False, m(1.7, 0.93), cached=True, failed=["ate_rmse < 1.5 m"]),
+        Trial(15.12, True, m(0.83, 0.95), cached=True),
+    ]
+    if artifacts_dir is not None:
+        for i, t in enumerate(trials):
+            t.artifacts["frame"] = str(png(artifacts_dir / f"frame{i}.png", (64, 96), 40 * i))
+        trials[0].artifacts["trajectory"] = str(png(artifacts_dir / "traj0.png", (60, 80), 200))
+    return Outcome(
+        test_id="tests/robustness/test_weather.py::test_fog[orbslam3-euroc_mh01]",
+        system="orbslam3",
+        dataset="euroc/MH_01",
+        parameter="fog.visibility_m",
+        worse="lower",
+        edge=25.0,
+        requirement=FOG_REQ,
+        verdict="passed",
+        boundary=Boundary(15.12, 13.67, "m"),
+        termination="tolerance",
+        trials=trials,
+        margin=25.0 - 15.12,
+        previous=Boundary(17.0, 15.0, "m"),
+        reproduction="sal run orbslam3 euroc/MH_01 --perturb 'fog(visibility_m=13.67)'",
+    )
+
+
+def rain() -> Outcome:
+    """Failed at the edge (tracking lost there), boundary 12.5-15 mm/h, a contradiction; id with <script>."""
+    return Outcome(
+        test_id=XSS_ID,
+        system="reference_vo",
+        dataset="kitti/07",
+        parameter="rain.rate_mm_h",
+        worse="higher",
+        edge=20.0,
+        requirement="ate_rmse < 1 m wherever rain.rate_mm_h <= 20 mm/h",
+        verdict="failed",
+        boundary=Boundary(12.5, 15.0, "mm/h"),
+        termination="tolerance",
+        trials=[
+            Trial(20.0, False, m(None, 0.0), failed=["ate_rmse < 1 m"], wall_time_s=41.0),
+            Trial(10.0, True, m(0.31, 1.0), wall_time_s=38.0),
+            Trial(15.0, False, m(2.9, 0.7), failed=["ate_rmse < 1 m"], wall_time_s=40.0),
+            Trial(12.5, True, m(0.52, 1.0), wall_time_s=39.0),
+            Trial(17.5, True, m(0.9, 0.99), wall_time_s=39.0),
+        ],
+        contradictions=["17.5 mm/h passed but 15 mm/h (milder) failed"],
+        margin=12.5 - 20.0,
+        reproduction="sal run reference_vo kitti/07 --perturb 'rain(rate_mm_h=15)' --seed 0",
+    )
+
+
+def flaky() -> Outcome:
+    return Outcome(
+        test_id="tests/test_motion.py::test_blur",
+        system="orbslam3",
+        dataset="tum/fr1_desk",
+        parameter="motion_blur.length_px",
+        worse="higher",
+        edge=15.0,
+        requirement="ate_rmse < 0.1 m wherever motion_blur.length_px <= 15 px",
+        verdict="flaky",
+        boundary=Boundary(15.0, 30.0, "px"),
+        termination="max_trials",
+        trials=[
+            Trial(15.0, True, m(0.08, 0.98)),
+            Trial(30.0, False, m(0.4, 0.9), failed=["ate_rmse < 0.1 m"]),
+            Trial(15.0, False, m(0.12, 0.97), repeat=True, failed=["ate_rmse < 0.1 m"]),
+        ],
+        margin=0.0,
+        reproduction="sal run orbslam3 tum/fr1_desk --perturb 'motion_blur(length_px=15)'",
+    )
+
+
+def regressed() -> Outcome:
+    return Outcome(
+        test_id="tests/test_transport.py::test_drop",
+        system="orbslam3",
+        dataset="euroc/V1_01",
+        parameter="frame_drop.drop_rate",
+        worse="higher",
+        edge=10.0,
+        requirement="tracking_rate >= 0.8 wherever frame_drop.drop_rate <= 10 %",
+        verdict="passed",
+        boundary=Boundary(19.0, 20.0, "%"),
+        termination="tolerance",
+        trials=[Trial(10.0, True, m(0.1, 0.95)), Trial(19.0, True, m(0.2, 0.82)), Trial(20.0, False, m(0.3, 0.7)), Trial(18.0, True, m(0.2, 0.85))],
+        margin=9.0,
+        previous=Boundary(30.0, 35.0, "%"),
+        regression="boundary moved from 30-35 % to 19-20 %, more than the tolerance (2 %)",
+        reproduction="sal run orbslam3 euroc/V1_01 --perturb 'frame_drop(drop_rate=20)'",
+    )
+
+
+def never_passed() -> Outcome:
+    return Outcome(
+        test_id="tests/test_weather.py::test_fog_night",
+        system="orbslam3",
+        dataset="kitti/07",
+        parameter="(night>>fog).visibility_m",
+        worse="lower",
+        edge=25.0,
+        requirement="ate_rmse < 1.5 m wherever (night>>fog).visibility_m >= 25 m",
+        verdict="failed",
+        boundary=Boundary(None, 100000.0, "m"),
+        termination="not_bracketed",
+        trials=[Trial(25.0, False, m(None, 0.05)), Trial(100000.0, False, m(None, 0.1))],
+        margin=None,
+        reproduction="sal run orbslam3 kitti/07 --perturb 'night() >> fog(visibility_m=100000)'",
+    )
+
+
+def png(path: Path, size: tuple[int, int], level: int) -> Path:
+    image = np.full((*size, 3), level % 256, np.uint8)
+    cv2.circle(image, (size[1] // 2, size[0] // 2), 10, (0, 0, 255), -1)
+    assert cv2.imwrite(str(path), image)
+    return path
+
+
+@pytest.fixture
+def outcomes(tmp_path: Path) -> list[Outcome]:
+    art = tmp_path / "artifacts"
+    art.mkdir()
+    return [fog(art), rain(), flaky(), regressed(), never_passed()]
+
+
+def test_summary_rows_hold_every_column(outcomes: list[Outcome]) -> None:
+    rows = {r["test_id"]: r for r in summary_rows(outcomes)}
+    f = rows[outcomes[0].test_id]
+    assert f["test"] == "test_weather.py::test_fog[orbslam3-euroc_mh01]"
+    assert (f["system"], f["parameter"], f["requirement"]) == ("orbslam3", "fog.visibility_m", ">= 25 m")
+    assert (f["boundary"], f["trials"], f["margin"], f["verdict"]) == ("13.67-15.12 m", "6 (6 cached)", "+9.88 m", "passed")
+    assert f["change"] == "+1.61 m"  # midpoint 16 -> 14.395 m: towards the severe side (lower visibility)
+    r = rows[XSS_ID]
+    assert (r["requirement"], r["boundary"], r["trials"], r["margin"], r["change"], r["verdict"]) == ("<= 20 mm/h", "12.5-15 mm/h", "5", "-7.5 mm/h", "-", "FAILED")
+    assert rows["tests/test_motion.py::test_blur"]["verdict"] == "FLAKY"
+    assert rows["tests/test_motion.py::test_blur"]["margin"] == "±0 px"
+    d = rows["tests/test_transport.py::test_drop"]
+    assert (d["change"], d["verdict"], d["status"]) == ("REGRESSED", "FAILED", "regressed")
+    n = rows["tests/test_weather.py::test_fog_night"]
+    assert (n["boundary"], n["margin"], n["requirement"]) == ("> 1e+05 m (never passed)", "-", ">= 25 m")
+
+
+def test_terminal_table_fits_and_truncates_ids_from_the_left(outcomes: list[Outcome]) -> None:
+    long = flaky()
+    long.test_id = "tests/deep/folder/test_motion.py::test_blur_with_a_really_long_name[orbslam3-tum_fr1_desk-stereo-inertial-night]"
+    lines = terminal_table([*outcomes, long])
+    assert all(len(line) <= 120 for line in lines)
+    header = lines[0].split()
+    assert header == ["test", "system", "parameter", "requirement", "boundary", "trials", "margin", "change", "verdict"]
+    assert set(lines[1]) <= {"-", " "} and len(lines) == 2 + 6
+    assert "6 (6 cached)" in lines[2] and "13.67-15.12 m" in lines[2] and ">= 25 m" in lines[2] and "+1.61 m" in lines[2]
+    assert "REGRESSED" in lines[5] and "FLAKY" in lines[4]
+    last = lines[-1]
+    assert "…" in last and "night]" in last and "tests/deep" not in last
+    # columns line up: the verdict column starts at the same place on every line
+    start = lines[0].index("verdict")
+    assert all(line[start:].split()[0] in {"verdict", "passed", "FAILED", "FLAKY"} for line in lines[2:])
+    narrow = terminal_table(outcomes, width=100)
+    assert all(len(line) <= 100 for line in narrow) and all("…" in line for line in narrow[2:3])
+
+
+def test_markdown_has_counts_table_and_details_only_where_needed(outcomes: list[Outcome], tmp_path: Path) -> None:
+    text = markdown_report(outcomes)
+    assert headline(outcomes) == "5 robustness requirements: 1 passed, 3 failed (1 regressed), 1 flaky"
+    assert "**5 robustness requirements: 1 passed, 3 failed (1 regressed), 1 flaky**" in text
+    assert "| test | system | parameter | requirement | boundary | trials | margin | change | verdict |" in text
+    assert text.count("\n| `test_") == 5
+    sections = re.findall(r"^### .*$", text, flags=re.MULTILINE)
+    assert len(sections) == 4
+    assert not any("test_fog[" in s for s in sections)  # passed: no details
+    details = text.split("### ")
+    drop = next(d for d in details if "test_drop" in d.splitlines()[0])
+    assert drop.startswith("REGRESSED: `tests/test_transport.py::test_drop`") and "previous boundary" in drop and "30-35 %" in drop
+    assert "**last pass** at 19 %" in drop and "**first fail** at 20 %" in drop and "tracking\\_rate 0.7" in drop
+    rain_part = next(d for d in details if "test_rain" in d.splitlines()[0])
+    assert "`sal run reference_vo kitti/07 --perturb 'rain(rate_mm_h=15)' --seed 0`" in rain_part
+    assert "17.5 mm/h passed but 15 mm/h (milder) failed" in rain_part
+    assert "| 1 | 20 | fail | - | 0 | " in rain_part  # tracking lost: no ATE
+    assert "<script>" not in text.replace("`test_weather.py::test_rain[<script>alert(1)</script>]`", "").replace(
+        f"`{XSS_ID}`", ""
+    )  # raw only inside code spans
+    assert all(line.count("|") - line.count("\\|") in (0, 10) for line in text.splitlines() if line.startswith("| ") and "test |" in line)
+    path = write_markdown(outcomes, tmp_path / "out" / "summary.md")
+    assert path.read_text(encoding="utf-8") == text
+    assert [p.name for p in path.parent.iterdir()] == ["summary.md"]
+
+
+def test_html_report_is_self_contained_and_escaped(outcomes: list[Outcome], tmp_path: Path) -> None:
+    out = tmp_path / "report"
+    index = write_html_report(outcomes, out)
+    assert index == out / "index.html"
+    page = index.read_text(encoding="utf-8")
+    for o in outcomes:
+        if o.test_id != XSS_ID:
+            assert o.test_id in page
+    assert "<script" not in page and "&lt;script&gt;alert(1)&lt;/script&gt;" in page
+    assert "http://" not in page and "https://" not in page and "<link" not in page
+    assert page.count("<section ") == 5 and page.count("class='badge") >= 10
+    sources = re.findall(r"<img[^>]* src='([^']+)'", page)
+    assert len(sources) == 5 + 6 + 1  # a plot per test, the fog frames, one trajectory
+    for src in sources:
+        assert not src.startswith("/") and ":" not in src
+        assert (out / src).is_file()
+    assert len(list(out.glob("assets/*/frame-*.png"))) == 6 and len(list(out.glob("assets/*/trajectory-*.png"))) == 1
+    assert "15.12 m: pass" in page and "5 m: fail" in page
+    # frames mild to severe: 25 m first, 5 m last
+    fog_section = page[page.index("test_fog[orbslam3") :]
+    captions = re.findall(r"<figcaption>([^<]+)</figcaption>", fog_section.split("</section>")[0])
+    assert captions[:6] == ["25 m: pass", "16.72 m: pass", "15.12 m: pass", "13.67 m: fail", "11.18 m: fail", "5 m: fail"]
+    assert write_html_report(outcomes, out) == index  # rewriting over an existing report works
+
+
+def test_metric_plot_is_a_non_blank_png_with_markers_band_and_edge(tmp_path: Path) -> None:
+    path = metric_plot(rain(), tmp_path / "plot" / "rain.png")
+    image = cv2.imread(str(path))
+    assert image is not None and image.shape == (600, 800, 3)
+    assert np.mean(image == 255) < 0.95 and len(np.unique(image.reshape(-1, 3) // 16, axis=0)) >= 10
+
+    def share(bgr: tuple[int, int, int], tol: int = 30) -> float:
+        return float(np.mean(np.all(np.abs(image.astype(int) - bgr) <= tol, axis=2)))
+
+    assert share((40, 39, 214)) > 1e-4 and share((44, 160, 44)) > 1e-4  # red fail, green pass markers
+    b, g, r = (image[..., i].astype(int) for i in range(3))
+    assert np.mean((r > 230) & (r - b > 40) & (g > b + 10) & (r > g + 10)) > 0.02  # the orange boundary band
+    assert [p.name for p in path.parent.iterdir()] == ["rain.png"]
+    fig = metric_figure(never_passed())  # 25 .. 100000 m: two decades or more
+    assert fig.axes[0].get_xscale() == "log"
+    assert [ax.get_xscale() for ax in metric_figure(fog()).axes] == ["linear", "linear"]
+    assert [ax.get_ylabel() for ax in metric_figure(fog()).axes] == ["ate_rmse [m]", "tracking_rate"]
+
+
+def test_a_sweep_point_without_envelope_trials_or_metrics_still_reports(tmp_path: Path) -> None:
+    point = Outcome(
+        test_id="test_sweep.py::test_levels[3]",
+        system="reference_vo",
+        dataset="synthetic",
+        parameter="noise.sigma",
+        worse="higher",
+        edge=None,
+        requirement="ate_rmse < 0.5 m",
+        verdict="failed",
+        boundary=Boundary(None, None, ""),
+        termination="single",
+    )
+    (row,) = summary_rows([point])
+    assert (row["requirement"], row["boundary"], row["trials"], row["margin"], row["change"]) == ("-", "unknown", "0", "-", "-")
+    assert "### FAILED: `test_sweep.py::test_levels[3]`" in markdown_report([point])
+    page = write_html_report([point], tmp_path / "r").read_text(encoding="utf-8")
+    assert "test_levels[3]" in page and "<img" not in page
+    image = cv2.imread(str(metric_plot(point, tmp_path / "empty.png")))
+    assert image is not None and image.shape == (600, 800, 3)
+    point.trials, point.boundary = [Trial(3.0, False, m(0.9, 1.0), failed=["ate_rmse < 0.5 m"])], Boundary(None, 3.0, "px")
+    assert summary_rows([point])[0]["boundary"] == "failed at 3 px"
