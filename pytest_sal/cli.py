@@ -15,7 +15,9 @@ from collections.abc import Sequence as ArgList
 from pathlib import Path
 from typing import Any
 
+from pytest_sal.cache_command import add_cache_commands
 from pytest_sal.cli_types import parse_key_values, positive_int
+from pytest_sal.history_command import add_history_commands
 from pytest_sal.module_commands import add_module_commands
 from pytest_sal.vocab_command import add_vocab_commands
 from sal_adapters import DATASETS, SalError, open_dataset
@@ -84,6 +86,8 @@ def build_parser() -> argparse.ArgumentParser:
     info.set_defaults(run=_run_dataset_info)
     add_module_commands(commands)
     add_vocab_commands(commands)
+    add_history_commands(commands)
+    add_cache_commands(commands)
     return parser
 
 

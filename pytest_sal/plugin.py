@@ -1,13 +1,232 @@
-"""The pytest plugin (entry point ``pytest11: sal``): markers and options; grows with the
-requirement language and boundary search. Heavy imports happen inside hooks, never here."""
+"""The pytest plugin (entry point ``pytest11: sal``): options, marks, fixtures and the hooks
+that turn a ``sal.require`` test into a boundary search whose interval is the test outcome.
+
+Heavy imports (OpenCV, evo, SLAM wrappers) happen inside fixtures and hooks, never here.
+Per-test outcomes travel on the test report (``user_properties``), so under ``pytest -n 2``
+only the controller collects them, prints the summary and writes history and reports.
+"""
 
 from __future__ import annotations
 
+import json
+import os
+from pathlib import Path
+from typing import Any
+
 import pytest
 
-__all__ = ["pytest_configure"]
+from pytest_sal.session import SAL_SESSION, SalSession, add_options, outcome_of
+
+__all__ = [
+    "pytest_addoption",
+    "pytest_collection_modifyitems",
+    "pytest_configure",
+    "pytest_generate_tests",
+    "pytest_pyfunc_call",
+    "pytest_report_teststatus",
+    "pytest_runtest_makereport",
+    "pytest_sessionfinish",
+    "pytest_terminal_summary",
+    "sal_dataset",
+    "sal_level",
+    "sal_outcome",
+    "sal_runs",
+    "sal_system",
+    "sal_trial",
+]
+
+#: The outcome of a test, on its item.
+OUTCOME = pytest.StashKey[Any]()
+
+MARKERS = (
+    "sal: a SLAM robustness test run by pytest-sal (select with -m sal)",
+    "sal_require(requirement): criteria that must hold wherever the envelope holds (sal.require)",
+    "sal_sweep(param, levels): run the test at named severity levels (sal.sweep, sal.at)",
+)
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    add_options(parser)
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    """Register the ``sal`` marker so that ``-m sal`` selects robustness tests."""
-    config.addinivalue_line("markers", "sal: a SLAM robustness test run by pytest-sal (select with -m sal)")
+    for line in MARKERS:
+        config.addinivalue_line("markers", line)
+    session = SalSession(config)
+    config.stash[SAL_SESSION] = session
+    config.pluginmanager.register(session, "sal-session")  # collects outcomes from reports
+
+
+def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
+    """``sal.sweep`` / ``sal.at``: one item per level, id ``rain.intensity_mm_h=3``."""
+    levels = getattr(metafunc.function, "sal_levels", None)
+    if levels is None:
+        return
+    ref, named = levels
+    if "sal_trial" not in metafunc.fixturenames:
+        raise pytest.UsageError(f"{metafunc.function.__name__}: sal.sweep / sal.at tests take the sal_trial fixture (def {metafunc.function.__name__}(sal_trial): ...)")
+    values = [(ref, name, value) for name, value in named.items()]
+    metafunc.parametrize("sal_level", values, ids=[f"{ref.label}={value:g}" for _, _, value in values], indirect=True)
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Check every robustness test's marks before anything runs."""
+    from pytest_sal.requirements import InvalidRequirement
+
+    for item in items:
+        function = getattr(item, "function", None)
+        if function is None:
+            continue
+        requirement = getattr(function, "sal_requirement", None)
+        levels = getattr(function, "sal_levels", None)
+        if levels is not None and requirement is None:
+            raise pytest.UsageError(f"{item.nodeid}: sal.sweep / sal.at need a sal.require(...) below them with the criteria each level must meet")
+        if requirement is None:
+            continue
+        if requirement.envelope is None and levels is None:
+            raise pytest.UsageError(
+                f"{item.nodeid}: {InvalidRequirement.__name__}: sal.require({requirement}) has no parameter bound to search; "
+                f"add one (fog.visibility_m >= 25) or put sal.sweep(...) / sal.at(...) above it"
+            )
+        if requirement.envelope is not None and levels is not None:
+            raise pytest.UsageError(f"{item.nodeid}: sal.sweep / sal.at run fixed levels; drop the envelope {requirement.envelope} from sal.require")
+
+
+# -- fixtures ----------------------------------------------------------------------------------
+@pytest.fixture
+def sal_runs(request: pytest.FixtureRequest) -> int:
+    """Runs per trial (metrics are the median): ``runs=`` of ``sal.require``, else ini
+    ``sal_runs`` (default 1). Override in conftest.py for every test."""
+    requirement = getattr(request.function, "sal_requirement", None)
+    if requirement is not None and "runs" in requirement.options:
+        return int(requirement.options["runs"])
+    return request.config.stash[SAL_SESSION].runs
+
+
+@pytest.fixture
+def sal_dataset(request: pytest.FixtureRequest) -> Any:
+    """The clean sequence to perturb. Default: the synthetic world that suits the perturbation
+    (the urban street, stereo, for weather and light; the indoor room, RGB-D, otherwise).
+    Override in conftest.py, e.g. ``sal_dataset = sal.dataset_fixture("kitti", "/data/kitti", sequence="07")``."""
+    return request.config.stash[SAL_SESSION].default_dataset(_ref_of(request))
+
+
+@pytest.fixture
+def sal_system(request: pytest.FixtureRequest) -> Any:
+    """The SLAM system under test. Default: ORB-SLAM3 when ``pyorbslam3`` is installed, else
+    the built-in reference VO (ini ``sal_system`` names another). Parametrise it in
+    conftest.py to test several systems: one item per system."""
+    return request.config.stash[SAL_SESSION].default_system()
+
+
+@pytest.fixture
+def sal_level(request: pytest.FixtureRequest) -> Any:
+    """The ``(param, name, value)`` of a ``sal.sweep`` level (set by parametrisation)."""
+    return request.param
+
+
+@pytest.fixture
+def sal_outcome(request: pytest.FixtureRequest, sal_dataset: Any, sal_system: Any, sal_runs: int, tmp_path: Path) -> Any:
+    """The ``Outcome`` of the boundary search of this test's ``sal.require``: verdict,
+    boundary interval, trials and their metrics. A requirement that does not hold fails the
+    test before its body runs."""
+    session: SalSession = request.config.stash[SAL_SESSION]
+    outcome = session.search(request.node, sal_dataset, sal_system, sal_runs, tmp_path)
+    request.node.stash[OUTCOME] = outcome
+    return outcome
+
+
+@pytest.fixture
+def sal_trial(request: pytest.FixtureRequest, sal_level: Any, sal_dataset: Any, sal_system: Any, sal_runs: int, tmp_path: Path) -> Any:
+    """The ``Trial`` at this item's ``sal.sweep`` level or ``sal.at`` point: ``metrics``
+    (ate_rmse, tracking_rate, ...), ``passed``, ``runs``. A level that misses the requirement
+    fails the test before its body runs."""
+    session: SalSession = request.config.stash[SAL_SESSION]
+    ref, _, value = sal_level
+    outcome = session.single(request.node, ref, value, sal_dataset, sal_system, sal_runs, tmp_path)
+    request.node.stash[OUTCOME] = outcome
+    return outcome.trials[0]
+
+
+def _ref_of(request: pytest.FixtureRequest) -> Any:
+    requirement = getattr(request.function, "sal_requirement", None)
+    if requirement is not None and requirement.envelope is not None:
+        return requirement.envelope.ref
+    levels = getattr(request.function, "sal_levels", None)
+    return levels[0] if levels else None
+
+
+# -- the verdict and the report ----------------------------------------------------------------
+@pytest.hookimpl(tryfirst=True)
+def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> None:
+    """Fail a robustness test whose requirement does not hold (or whose boundary regressed)
+    in its call phase, so it is reported FAILED with the search's message."""
+    outcome = pyfuncitem.stash.get(OUTCOME, None)
+    if outcome is not None and not outcome.passed:
+        from pytest_sal.robustness import failure_message
+
+        __tracebackhide__ = True
+        pytest.fail(failure_message(outcome), pytrace=False)
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) -> Any:
+    report = yield
+    outcome = item.stash.get(OUTCOME, None)
+    if outcome is not None and report.when == "call":
+        properties = [
+            ("sal_boundary_pass", "" if outcome.boundary.pass_value is None else f"{outcome.boundary.pass_value:g}"),
+            ("sal_boundary_fail", "" if outcome.boundary.fail_value is None else f"{outcome.boundary.fail_value:g}"),
+            ("sal_trials", str(len(outcome.trials))),
+            ("sal_outcome", json.dumps(outcome.to_dict())),
+        ]
+        report.user_properties.extend(properties)
+        item.user_properties.extend(properties)  # JUnit XML writes the properties of the teardown report
+        report.sections.append(("pytest-sal", _trace(outcome)))
+    return report
+
+
+def pytest_report_teststatus(report: pytest.TestReport, config: pytest.Config) -> Any:
+    """Verbose mode shows the boundary: ``PASSED (fog.visibility_m boundary 14-16 m)``."""
+    if report.when != "call" or not report.passed:
+        return None
+    outcome = outcome_of(report)
+    if outcome is None:
+        return None
+    if outcome.termination == "single":
+        trial = outcome.trials[0]
+        unit = f" {outcome.boundary.unit}" if outcome.boundary.unit else ""
+        shown = ", ".join(f"{c.split()[0]} {trial.metrics.get(c.split()[0]):.3g}" for c in _criteria_names(outcome) if trial.metrics.get(c.split()[0]) is not None)
+        return "passed", ".", (f"PASSED ({outcome.parameter} = {trial.value:g}{unit}: {shown})", {"green": True})
+    return "passed", ".", (f"PASSED ({outcome.parameter} boundary {outcome.boundary.text()})", {"green": True})
+
+
+def _criteria_names(outcome: Any) -> list[str]:
+    """The criteria of the requirement text (``ate_rmse < 1.5 m``), in order."""
+    return outcome.requirement.split(" wherever ")[0].split(" and ")
+
+
+def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: pytest.Config) -> None:
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        return
+    config.stash[SAL_SESSION].terminal_summary(terminalreporter)
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        return
+    session.config.stash[SAL_SESSION].finish()
+
+
+def _trace(outcome: Any) -> str:
+    unit = f" {outcome.boundary.unit}" if outcome.boundary.unit else ""
+    lines = [f"{outcome.requirement}; boundary {outcome.boundary.text()} ({outcome.termination})"]
+    for trial in outcome.trials:
+        verdict = "pass" if trial.passed else "FAIL"
+        flags = " (cached)" if trial.cached else ""
+        flags += " (repeat)" if trial.repeat else ""
+        metrics = ", ".join(f"{k} {v:.4g}" for k, v in trial.metrics.items() if isinstance(v, float))
+        lines.append(f"  {outcome.parameter} = {trial.value:g}{unit}: {verdict}  {metrics}{flags}")
+    return "\n".join(lines)
+

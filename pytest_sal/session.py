@@ -1,0 +1,233 @@
+"""Session state of pytest-sal: options, the trial cache, the history, the outcomes collected
+on the controller, the summary table and the reports written at the end."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+__all__ = ["SAL_SESSION", "SalSession", "add_options", "outcome_of"]
+
+#: The session object, in ``config.stash``.
+SAL_SESSION = pytest.StashKey["SalSession"]()
+
+#: Frames of the default synthetic worlds (short enough for CI, long enough to track).
+DEFAULT_FRAMES = {"urban": 60, "indoor": 90}
+#: Modules whose tests default to the urban street (weather and light); others to the room.
+OUTDOOR_MODULES = {"fog", "rain", "snow", "night", "sun_glare", "motion_blur"}
+
+
+def _compare_fail(text: str) -> Any:
+    from pytest_sal.history import parse_compare_fail
+
+    return parse_compare_fail(text)
+
+
+def _size(text: str) -> int:
+    from pytest_sal.cache import parse_size
+
+    try:
+        return parse_size(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def add_options(parser: pytest.Parser) -> None:
+    """Every option of the plugin: ``--sal-*`` in one group, persistent ones mirrored in ini."""
+    group = parser.getgroup("sal", "SLAM robustness (pytest-sal)")
+    group.addoption("--sal-cache-dir", dest="sal_cache_dir", metavar="DIR", default=None,
+                    help="trial cache folder (ini sal_cache_dir). Default: .sal/cache under the rootdir")
+    group.addoption("--sal-cache-size", dest="sal_cache_size", metavar="SIZE", type=_size, default=None,
+                    help="evict least-recently-used cache entries above SIZE (e.g. 5GB; ini sal_cache_size). Default: no limit")
+    group.addoption("--sal-no-cache", dest="sal_no_cache", action="store_true", default=False,
+                    help="run every trial, reading and writing no cache. Default: %(default)r")
+    group.addoption("--sal-history-dir", dest="sal_history_dir", metavar="DIR", default=None,
+                    help="history store (ini sal_history_dir). Default: .sal/history under the rootdir")
+    group.addoption("--sal-no-history", dest="sal_no_history", action="store_true", default=False,
+                    help="do not append this run's boundaries to the history. Default: %(default)r")
+    group.addoption("--sal-save", dest="sal_save", metavar="NAME", default=None,
+                    help="name this run in the history (compare against it later with --sal-compare=NAME)")
+    group.addoption("--sal-compare", dest="sal_compare", metavar="REF", nargs="?", const="last", default=None,
+                    help="compare each boundary with the history: the last run (default), a run number, name or commit")
+    group.addoption("--sal-compare-fail", dest="sal_compare_fail", metavar="CHECK", action="append", type=_compare_fail, default=[],
+                    help="fail a test whose result regressed against --sal-compare: boundary:10%% (relative), boundary:2.5 "
+                    "(in the parameter's unit), ate_rmse:0.2 or ate_rmse:15%% at the edge. Repeatable")
+    group.addoption("--sal-report-md", dest="sal_report_md", metavar="FILE", default=None,
+                    help="write a Markdown summary (for a CI job summary) to FILE")
+    group.addoption("--sal-report-html", dest="sal_report_html", metavar="DIR", default=None,
+                    help="write an HTML report with example frames and plots to DIR/index.html")
+    parser.addini("sal_cache_dir", "trial cache folder (default .sal/cache)", default=None)
+    parser.addini("sal_cache_size", "cache size limit, e.g. 5GB (default: none)", default=None)
+    parser.addini("sal_history_dir", "history store (default .sal/history)", default=None)
+    parser.addini("sal_tolerance", "default search tolerance, percent of the envelope's edge (default 10)", default="10")
+    parser.addini("sal_max_trials", "default trial budget of a boundary search (default 8)", default="8")
+    parser.addini("sal_runs", "runs per trial (default 1)", default="1")
+    parser.addini("sal_seed", "perturbation seed (default 0)", default="0")
+    parser.addini("sal_timeout", "seconds per SLAM run before it is killed (default 600)", default="600")
+    parser.addini("sal_system", "default system: orbslam3 when installed, else reference_vo", default=None)
+
+
+def outcome_of(report: pytest.TestReport) -> Any:
+    """The ``Outcome`` a report carries, or ``None``."""
+    for name, value in report.user_properties:
+        if name == "sal_outcome":
+            from pytest_sal.outcome import Outcome
+
+            return Outcome.from_dict(json.loads(value))
+    return None
+
+
+class SalSession:
+    """One pytest session's pytest-sal state (also a plugin: it collects outcomes)."""
+
+    def __init__(self, config: pytest.Config):
+        self.config = config
+        root = Path(config.rootpath)
+        opt = config.option
+
+        def ini(name: str) -> Any:
+            return config.getini(name)
+
+        self.cache_dir = Path(getattr(opt, "sal_cache_dir", None) or ini("sal_cache_dir") or root / ".sal" / "cache")
+        self.cache_size = getattr(opt, "sal_cache_size", None) or (_size(ini("sal_cache_size")) if ini("sal_cache_size") else None)
+        self.use_cache = not getattr(opt, "sal_no_cache", False)
+        self.history_dir = Path(getattr(opt, "sal_history_dir", None) or ini("sal_history_dir") or root / ".sal" / "history")
+        self.compare = getattr(opt, "sal_compare", None)
+        self.checks = list(getattr(opt, "sal_compare_fail", []) or [])
+        if self.checks and self.compare is None:
+            self.compare = "last"
+        self.runs = int(ini("sal_runs"))
+        self.seed = int(ini("sal_seed"))
+        self.timeout = float(ini("sal_timeout"))
+        self.system_name = ini("sal_system")
+        from pytest_sal.robustness import SearchSettings
+
+        self.settings = SearchSettings(tolerance_pct=float(ini("sal_tolerance")), max_trials=int(ini("sal_max_trials")))
+        self.outcomes: list[Any] = []
+        self._cache: Any = None
+        self._history: Any = None
+        self._datasets: dict[str, Any] = {}
+
+    # -- collaborators -------------------------------------------------------------------------
+    @property
+    def cache(self) -> Any:
+        if self._cache is None and self.use_cache:
+            from pytest_sal.cache import ContentCache
+
+            self._cache = ContentCache(self.cache_dir, self.cache_size)
+        return self._cache
+
+    @property
+    def history(self) -> Any:
+        if self._history is None:
+            from pytest_sal.history import History
+
+            self._history = History(self.history_dir)
+        return self._history
+
+    def default_dataset(self, ref: Any) -> Any:
+        """The synthetic world suiting the perturbation of ``ref`` (opened once per session)."""
+        module = getattr(getattr(ref, "param", None), "owner", None)
+        scene = "urban" if getattr(module, "name", "") in OUTDOOR_MODULES else "indoor"
+        if scene not in self._datasets:
+            from sal_adapters import open_dataset
+
+            sensor = "stereo" if scene == "urban" else "rgbd"
+            self._datasets[scene] = open_dataset("synthetic", scene=scene, frames=DEFAULT_FRAMES[scene], sensor=sensor)
+        return self._datasets[scene]
+
+    def default_system(self) -> Any:
+        from sal_wrappers import create
+
+        if self.system_name:
+            return create(self.system_name)
+        import importlib.util
+
+        return create("orbslam3" if importlib.util.find_spec("pyorbslam3") else "reference_vo")
+
+    # -- running -------------------------------------------------------------------------------
+    def _runner(self, item: pytest.Item, ref: Any, dataset: Any, system: Any, runs: int, workdir: Path) -> Any:
+        from pytest_sal.trials import TrialRunner
+
+        requirement = item.function.sal_requirement  # type: ignore[attr-defined]
+        seed = int(requirement.options.get("seed", self.seed))
+        return TrialRunner(dataset, ref, system, requirement, runs=runs, seed=seed, cache=self.cache, workdir=workdir, timeout=self.timeout)
+
+    def search(self, item: pytest.Item, dataset: Any, system: Any, runs: int, workdir: Path) -> Any:
+        """Boundary search of ``item``'s requirement; compared with the history when asked."""
+        from pytest_sal.history import warm_start
+        from pytest_sal.robustness import search_outcome
+
+        requirement = item.function.sal_requirement  # type: ignore[attr-defined]
+        runner = self._runner(item, requirement.envelope.ref, dataset, system, runs, workdir)
+        previous = self._previous(item.nodeid, system.name, dataset.name, self.compare or "last")
+        envelope = requirement.envelope
+        start = warm_start(previous, parameter=envelope.ref.label, edge=envelope.value, worse=envelope.ref.param.worse)
+        outcome = search_outcome(runner, requirement, self.settings, item.nodeid, start)
+        return self._compared(outcome)
+
+    def single(self, item: pytest.Item, ref: Any, value: float, dataset: Any, system: Any, runs: int, workdir: Path) -> Any:
+        from pytest_sal.robustness import single_outcome
+
+        runner = self._runner(item, ref, dataset, system, runs, workdir)
+        return self._compared(single_outcome(runner, item.function.sal_requirement, item.nodeid, value))  # type: ignore[attr-defined]
+
+    def _previous(self, test_id: str, system: str, dataset: str, ref: str) -> Any:
+        if not self.history_dir.is_dir():
+            return None
+        return self.history.previous((test_id, system, dataset), ref)
+
+    def _compared(self, outcome: Any) -> Any:
+        if self.compare is None:
+            return outcome
+        from pytest_sal.history import regressions
+
+        previous = self._previous(outcome.test_id, outcome.system, outcome.dataset, self.compare)
+        if previous is not None:
+            outcome.previous = previous.boundary
+            found = regressions(self.checks, outcome, previous)
+            outcome.regression = "; ".join(found) if found else None
+        return outcome
+
+    # -- collecting and reporting (controller) -------------------------------------------------
+    def pytest_runtest_logreport(self, report: pytest.TestReport) -> None:
+        if report.when == "call" and not os.environ.get("PYTEST_XDIST_WORKER"):
+            outcome = outcome_of(report)
+            if outcome is not None:
+                self.outcomes.append(outcome)
+
+    def terminal_summary(self, terminal: Any) -> None:
+        if not self.outcomes:
+            return
+        from pytest_sal.report import terminal_table
+
+        terminal.section("pytest-sal robustness boundaries")
+        for line in terminal_table(self.outcomes, width=max(self.config.get_terminal_writer().fullwidth, 120)):
+            terminal.write_line(line)
+
+    def finish(self) -> None:
+        """Write the history and the reports (controller only)."""
+        if not self.outcomes:
+            return
+        from pytest_sal.history import commit_info, machine_info
+
+        commit, dirty = commit_info(self.config.rootpath)
+        machine = machine_info()
+        for outcome in self.outcomes:
+            outcome.commit = commit + ("+dirty" if dirty else "")
+            outcome.machine = machine.get("hostname", "")
+        if not self.config.option.sal_no_history:
+            self.history.append_run(self.outcomes, name=self.config.option.sal_save)
+        if self.config.option.sal_report_md:
+            from pytest_sal.report import write_markdown
+
+            write_markdown(self.outcomes, Path(self.config.option.sal_report_md))
+        if self.config.option.sal_report_html:
+            from pytest_sal.report import write_html_report
+
+            write_html_report(self.outcomes, Path(self.config.option.sal_report_html))

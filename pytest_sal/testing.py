@@ -1,0 +1,86 @@
+"""Test doubles for testing pytest-sal itself and plug-ins: a deterministic fake SLAM system
+whose tracking degrades with the severity of the perturbation it is given.
+
+``FakeSlam`` never looks at pixels: it reads the applied chain from the perturbed sequence
+(``sequence.meta["perturbation"]``), takes the value of one parameter and tracks the first
+``round(n * tracked(value))`` frames exactly (the ground-truth pose), the rest LOST. So a test
+of the plugin knows the exact boundary: with ``tracked = lambda v: min(1, v / 40)`` on
+``fog.visibility_m`` and the criterion ``tracking_rate >= 0.5``, the boundary is 20 m.
+The product never uses it: real tests run ORB-SLAM3 or the reference VO.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sal_adapters import Sequence
+from sal_wrappers.base import RunResult, SlamSystem, TrackState
+
+__all__ = ["FakeSlam", "applied_value"]
+
+
+def applied_value(sequence: Sequence, address: str) -> float | None:
+    """The value of ``module.parameter`` (e.g. ``fog.visibility_m``) in the chain applied to
+    ``sequence``, or ``None`` for a clean sequence or a chain without that module."""
+    module, _, name = address.partition(".")
+    chain = sequence.meta.get("perturbation")
+    if chain is None:
+        return None
+    steps = chain.get("steps", [chain])
+    for step in steps:
+        if step.get("module") == module and name in step.get("params", {}):
+            return float(step["params"][name])
+    return None
+
+
+class FakeSlam(SlamSystem):
+    """Tracks a share ``tracked(value)`` (0..1) of the frames, ``value`` being the applied
+    value of ``parameter``; the clean sequence tracks fully. ``crash_below`` / ``crash_above``
+    make the run fail (as a crashed child would) beyond a value; ``flaky`` alternates the
+    share between ``tracked(value)`` and ``tracked(value) + flaky`` from run to run (a noisy
+    system near its threshold). Options are JSON values (``tracked`` as a small expression in
+    ``v``, e.g. ``"min(1, v / 40)"``) so that they are part of cache keys."""
+
+    name = "fake"
+    sensors = ("mono", "stereo", "rgbd")
+    description = "deterministic fake SLAM for testing the plugin (tracking falls with severity)"
+
+    def __init__(self, parameter: str = "fog.visibility_m", tracked: str = "min(1, v / 40)", flaky: float = 0.0, calls_file: str | None = None):
+        self.parameter = parameter
+        self.tracked = tracked
+        self.flaky = float(flaky)
+        self.calls_file = calls_file
+        self._share: Callable[[float], float] = eval(f"lambda v: {tracked}", {"min": min, "max": max, "abs": abs})  # noqa: S307 - a test double's own option
+        self._runs = 0
+
+    def options(self) -> dict[str, Any]:
+        return {"parameter": self.parameter, "tracked": self.tracked, "flaky": self.flaky}
+
+    def run(self, sequence: Sequence, workdir: Path, timeout: float | None = None) -> RunResult:
+        start = time.perf_counter()
+        value = applied_value(sequence, self.parameter)
+        share = 1.0 if value is None else float(np.clip(self._share(value), 0.0, 1.0))
+        if self.flaky and self._runs % 2:
+            share = min(1.0, share + self.flaky)
+        self._runs += 1
+        if self.calls_file:
+            with open(self.calls_file, "a", encoding="utf-8") as handle:
+                handle.write(json.dumps({"value": value}) + "\n")
+        n = len(sequence)
+        tracked = int(round(n * share))
+        states = np.full(n, TrackState.LOST, dtype=np.int8)
+        states[:tracked] = TrackState.OK
+        trajectory = None
+        if tracked and sequence.groundtruth is not None and sequence.groundtruth_is_per_frame:
+            trajectory = sequence.groundtruth.select(list(range(tracked)))
+        return RunResult(
+            system=self.name, sequence=sequence.name, sensor=sequence.sensor, timestamps=sequence.timestamps,
+            states=states, trajectory=trajectory, maps=1 if tracked else 0, wall_time_s=time.perf_counter() - start,
+            track_time_s=0.0, info={"value": value, "share": share},
+        )
