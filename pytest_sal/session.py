@@ -156,7 +156,10 @@ class SalSession:
 
         requirement = item.function.sal_requirement  # type: ignore[attr-defined]
         seed = int(requirement.options.get("seed", self.seed))
-        return TrialRunner(dataset, ref, system, requirement, runs=runs, seed=seed, cache=self.cache, workdir=workdir, timeout=self.timeout)
+        return TrialRunner(
+            dataset, ref, system, requirement, runs=runs, seed=seed, cache=self.cache, workdir=workdir, timeout=self.timeout,
+            artifacts=bool(self.config.option.sal_report_html),
+        )
 
     def search(self, item: pytest.Item, dataset: Any, system: Any, runs: int, workdir: Path) -> Any:
         """Boundary search of ``item``'s requirement; compared with the history when asked."""

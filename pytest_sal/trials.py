@@ -60,6 +60,8 @@ class TrialRunner:
         cache: the trial cache, or ``None`` to always run.
         workdir: where runs write their logs and files.
         timeout: seconds per run.
+        artifacts: also store an example frame and a trajectory plot with each computed trial
+            (for the HTML report; trials read from the cache keep what they were stored with).
     """
 
     dataset: Sequence
@@ -71,14 +73,16 @@ class TrialRunner:
     cache: ContentCache | None = None
     workdir: Path = Path(".")
     timeout: float | None = 600.0
+    artifacts: bool = False
 
     def module_value(self, value: float) -> Any:
         """The module's parameter value for search value ``value`` (``canonicalize``)."""
         scale = self.ref.param.search
         return scale.canonicalize(value) if scale is not None else value
 
-    def key(self, value: float) -> str:
+    def key(self, value: float, attempt: int = 0) -> str:
         module = self.ref.module(self.module_value(value))
+        repeat = {"attempt": attempt} if attempt else {}  # a repeat is its own trial, not the first one's cache entry
         return cache_key(
             runner=RUNNER_VERSION,
             dataset=self.dataset.fingerprint,
@@ -86,12 +90,14 @@ class TrialRunner:
             seed=self.seed,
             system={"name": self.system.name, "version": self.system.version, "options": self.system.options()},
             runs=self.runs,
+            **repeat,
         )
 
-    def evaluate(self, value: float) -> Trial:
-        """The trial at search value ``value`` (from the cache when it was run before)."""
+    def evaluate(self, value: float, attempt: int = 0) -> Trial:
+        """The trial at search value ``value`` (from the cache when it was run before);
+        ``attempt`` > 0: a repeat of it (the flakiness check), run and cached apart."""
         start = time.perf_counter()
-        key = self.key(value)
+        key = self.key(value, attempt)
         if self.cache is None:
             data, cached = self._run(value, key), False
         else:
@@ -114,7 +120,7 @@ class TrialRunner:
         groundtruth = perturbed.groundtruth
         runs = []
         artifacts: dict[str, str] = {}
-        folder = None if self.cache is None else self.cache.root / "artifacts"
+        folder = self.cache.root / "artifacts" if self.cache is not None and self.artifacts else None
         for number in range(self.runs):
             result = self.system.run(perturbed, self.workdir / f"{key[:12]}-run{number}", timeout=self.timeout)
             scored = evaluate(result, groundtruth)
