@@ -387,6 +387,18 @@ class RegressionCheck(ABC):
     def _limit_text(self, unit: str) -> str:
         return f"{self.limit:g} %" if self.relative else _quantity(self.limit, unit)
 
+    def _moved(self, before: float, now: float, worse_by: float, unit: str) -> str | None:
+        """The change from ``before`` to ``now`` in words (``+47 %``, ``+7 m``) when getting
+        worse by ``worse_by`` exceeds the limit, else ``None``."""
+        if worse_by <= 0:
+            return None
+        change = worse_by if not self.relative else (math.inf if before == 0 else 100.0 * worse_by / abs(before))
+        if not self._exceeds(change):
+            return None
+        if self.relative:
+            return "from 0" if before == 0 else _percent(100.0 * (now - before) / abs(before))
+        return _quantity(now - before, unit, sign=True)
+
 
 @dataclass(frozen=True)
 class BoundaryCheck(RegressionCheck):
@@ -428,17 +440,9 @@ class BoundaryCheck(RegressionCheck):
                 f"{label} moved toward the mild side: passed {where} {_quantity(before, unit)} before, "
                 f"now failed everywhere searched (limit {self._limit_text(unit)})"
             )
-        milder = (now - before) if current.worse == "lower" else (before - now)
-        if milder <= 0:
+        moved = self._moved(before, now, (now - before) if current.worse == "lower" else (before - now), unit)
+        if moved is None:
             return None
-        change = milder if not self.relative else (math.inf if before == 0 else 100.0 * milder / abs(before))
-        if not self._exceeds(change):
-            return None
-        signed = now - before
-        if self.relative:
-            moved = "from 0" if before == 0 else _percent(100.0 * signed / abs(before))
-        else:
-            moved = _quantity(signed, unit, sign=True)
         toward = "toward the requirement" if _at_or_beyond_edge(now, current) else "toward the mild side, past the requirement"
         return (
             f"{label} moved {toward}: passed {where} {_quantity(before, unit)} before, now only {where} "
@@ -478,17 +482,9 @@ class MetricCheck(RegressionCheck):
             return None
         if now is None:
             return f"{at} got worse: {_quantity(before, metric.unit)} before, now not available (the runs failed)"
-        worse_by = (now - before) if metric.better == "lower" else (before - now)
-        if worse_by <= 0:
+        moved = self._moved(before, now, (now - before) if metric.better == "lower" else (before - now), metric.unit)
+        if moved is None:
             return None
-        change = worse_by if not self.relative else (math.inf if before == 0 else 100.0 * worse_by / abs(before))
-        if not self._exceeds(change):
-            return None
-        signed = now - before
-        if self.relative:
-            moved = "from 0" if before == 0 else _percent(100.0 * signed / abs(before))
-        else:
-            moved = _quantity(signed, metric.unit, sign=True)
         return (
             f"{at} got worse: {_quantity(before, metric.unit)} before, now {_quantity(now, metric.unit)} "
             f"({moved}, limit {self._limit_text(metric.unit)})"
