@@ -30,7 +30,6 @@ import os
 import platform
 import re
 import subprocess
-import tempfile
 import warnings
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
@@ -41,6 +40,7 @@ from typing import Any
 from pytest_sal.outcome import Outcome, Trial
 from pytest_sal.requirements import METRICS
 from sal_adapters.errors import SalError
+from sal_adapters.textfiles import atomic_write_text
 
 __all__ = [
     "DEFAULT_ROOT",
@@ -322,16 +322,7 @@ def _read_run(path: Path) -> RunRecord | None:
 
 
 def _write_atomic(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(text)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    atomic_write_text(path, text)
 
 
 def _safe_name(name: str) -> str:

@@ -8,8 +8,6 @@ PNG atomically (temporary file, then ``os.replace``) and returns the path; the m
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +17,7 @@ from matplotlib.figure import Figure
 
 from pytest_sal.metrics import AteResult
 from sal_adapters.errors import SalError
+from sal_adapters.textfiles import atomic_write
 from sal_adapters.trajectory import Trajectory
 
 __all__ = ["PLANES", "ate_figure", "plot_ate_over_time", "plot_trajectories", "save_png", "trajectory_figure"]
@@ -102,18 +101,8 @@ def plot_ate_over_time(ate_results: dict[str, AteResult], path: str | Path, *, t
 
 
 def save_png(fig: Figure, path: str | Path) -> Path:
-    """Render ``fig`` to ``path`` through a temporary file in the same folder and ``os.replace``."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            fig.savefig(handle, format="png", dpi=DPI)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    """Render ``fig`` to ``path`` as a PNG, atomically (``sal_adapters.textfiles.atomic_write``)."""
+    return atomic_write(path, lambda handle: fig.savefig(handle, format="png", dpi=DPI), binary=True)
 
 
 def _figure() -> tuple[Figure, Axes]:

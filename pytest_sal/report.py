@@ -17,15 +17,14 @@ the system copes with more than the requirement asks (margin) or than it did bef
 from __future__ import annotations
 
 import math
-import os
 import re
-import tempfile
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
 from pytest_sal.outcome import Boundary, Outcome, Trial
 from pytest_sal.requirements import METRICS
+from sal_adapters.textfiles import atomic_write_text
 
 __all__ = [
     "COLUMNS",
@@ -385,18 +384,8 @@ def write_markdown(outcomes: Iterable[Outcome], path: str | Path, *, title: str 
 
 
 def write_text_atomic(path: str | Path, text: str) -> Path:
-    """Write ``text`` (UTF-8) through a temporary file in the same folder and ``os.replace``."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as handle:
-            handle.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    """Write ``text`` (UTF-8) atomically (``sal_adapters.textfiles.atomic_write_text``)."""
+    return atomic_write_text(path, text)
 
 
 # ---------------------------------------------------------------- HTML (pytest_sal.report_html)
