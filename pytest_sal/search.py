@@ -141,10 +141,10 @@ def boundary_search(
         if (edge_passed and space.worse(hint, edge)) or (not edge_passed and space.worse(edge, hint)):
             bracket(hint, run(hint))
 
-    if (passing is None or failing is None) and len(trials) < max_trials:
+    if (passing is None or failing is None) and len(trials) < max_trials and all(t.value != far for t in trials):
         bracket(far, run(far))
     if passing is None or failing is None:
-        termination = "max_trials" if len(trials) >= max_trials and trials[-1].value != far else "not_bracketed"
+        termination = "not_bracketed" if any(t.value == far for t in trials) else "max_trials"
     else:
         termination = _bisect(run, bracket, space, tolerance, max_trials, trials, lambda: (passing, failing))
     return SearchResult(edge_passed, passing, failing, termination, trials, _contradictions(trials, space), flaky)

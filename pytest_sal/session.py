@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 from pathlib import Path
 from typing import Any
 
@@ -67,6 +66,7 @@ def add_options(parser: pytest.Parser) -> None:
     parser.addini("sal_tolerance", "default search tolerance, percent of the envelope's edge (default 10)", default="10")
     parser.addini("sal_max_trials", "default trial budget of a boundary search (default 8)", default="8")
     parser.addini("sal_runs", "runs per trial (default 1)", default="1")
+    parser.addini("sal_noise", "relative distance of a metric to its threshold at the envelope's edge within which the edge trial is repeated to detect a flaky verdict (default 0.05)", default="0.05")
     parser.addini("sal_seed", "perturbation seed (default 0)", default="0")
     parser.addini("sal_timeout", "seconds per SLAM run before it is killed (default 600)", default="600")
     parser.addini("sal_system", "default system: orbslam3 when installed, else reference_vo", default=None)
@@ -107,7 +107,9 @@ class SalSession:
         self.system_name = ini("sal_system")
         from pytest_sal.robustness import SearchSettings
 
-        self.settings = SearchSettings(tolerance_pct=float(ini("sal_tolerance")), max_trials=int(ini("sal_max_trials")))
+        self.settings = SearchSettings(
+            tolerance_pct=float(ini("sal_tolerance")), max_trials=int(ini("sal_max_trials")), noise=float(ini("sal_noise"))
+        )
         self.outcomes: list[Any] = []
         self._cache: Any = None
         self._history: Any = None
@@ -199,7 +201,7 @@ class SalSession:
 
     # -- collecting and reporting (controller) -------------------------------------------------
     def pytest_runtest_logreport(self, report: pytest.TestReport) -> None:
-        if report.when == "call" and not os.environ.get("PYTEST_XDIST_WORKER"):
+        if report.when == "call" and not hasattr(self.config, "workerinput"):  # controller or plain session
             outcome = outcome_of(report)
             if outcome is not None:
                 self.outcomes.append(outcome)

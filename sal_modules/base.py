@@ -34,6 +34,7 @@ from sal_modules.params import Param
 
 if TYPE_CHECKING:
     from sal_modules.chain import Composite
+    from sal_modules.refs import ParamRef
 
 __all__ = ["STREAMS", "DepthLookup", "ModuleContext", "Perturbation", "SequencePerturbation"]
 
@@ -181,6 +182,16 @@ class Perturbation(ABC):
     def with_params(self, **changes: Any) -> Perturbation:
         """A copy with some parameters changed (validated like the constructor)."""
         return type(self)(**{**self._params, **changes})
+
+    def ref(self, name: str) -> ParamRef:
+        """Parameter ``name`` of this configured module, for a bound that keeps its other
+        settings: ``motion_blur(exposure_ms=100).ref("speed_kmh") >= 30`` (on an instance,
+        ``.speed_kmh`` is the value itself)."""
+        from sal_modules.refs import ParamRef
+
+        if name not in self.parameters():
+            raise self.param_error(f"{self.name} has no parameter {name!r}; parameters: {', '.join(self.parameters())}")
+        return ParamRef(self, name, self.parameters()[name])
 
     # -- identity and JSON ---------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
