@@ -9,7 +9,6 @@ only the controller collects them, prints the summary and writes history and rep
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +24,7 @@ __all__ = [
     "pytest_pyfunc_call",
     "pytest_report_teststatus",
     "pytest_runtest_makereport",
+    "pytest_runtest_setup",
     "pytest_sessionfinish",
     "pytest_terminal_summary",
     "sal_dataset",
@@ -37,6 +37,8 @@ __all__ = [
 
 #: The outcome of a test, on its item.
 OUTCOME = pytest.StashKey[Any]()
+#: Why a robustness test's marks are misused (xdist workers report it at setup).
+MISUSE = pytest.StashKey[str]()
 
 MARKERS = (
     "sal: a SLAM robustness test run by pytest-sal (select with -m sal)",
@@ -79,17 +81,30 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             continue
         requirement = getattr(function, "sal_requirement", None)
         levels = getattr(function, "sal_levels", None)
+        message = None
         if levels is not None and requirement is None:
-            raise pytest.UsageError(f"{item.nodeid}: sal.sweep / sal.at need a sal.require(...) below them with the criteria each level must meet")
-        if requirement is None:
-            continue
-        if requirement.envelope is None and levels is None:
-            raise pytest.UsageError(
+            message = f"{item.nodeid}: sal.sweep / sal.at need a sal.require(...) below them with the criteria each level must meet"
+        elif requirement is not None and requirement.envelope is None and levels is None:
+            message = (
                 f"{item.nodeid}: {InvalidRequirement.__name__}: sal.require({requirement}) has no parameter bound to search; "
                 f"add one (fog.visibility_m >= 25) or put sal.sweep(...) / sal.at(...) above it"
             )
-        if requirement.envelope is not None and levels is not None:
-            raise pytest.UsageError(f"{item.nodeid}: sal.sweep / sal.at run fixed levels; drop the envelope {requirement.envelope} from sal.require")
+        elif requirement is not None and requirement.envelope is not None and levels is not None:
+            message = f"{item.nodeid}: sal.sweep / sal.at run fixed levels; drop the envelope {requirement.envelope} from sal.require"
+        if message is None:
+            continue
+        if hasattr(config, "workerinput"):  # an xdist worker: xdist would show a UsageError as a bare INTERNALERROR
+            item.stash[MISUSE] = message
+        else:
+            raise pytest.UsageError(message)
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    """Under xdist, a misused robustness test errors in its setup with the usage message."""
+    message = item.stash.get(MISUSE, None)
+    if message is not None:
+        pytest.fail(message, pytrace=False)
 
 
 # -- fixtures ----------------------------------------------------------------------------------
@@ -207,14 +222,14 @@ def _criteria_names(outcome: Any) -> list[str]:
 
 
 def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: pytest.Config) -> None:
-    if os.environ.get("PYTEST_XDIST_WORKER"):
+    if hasattr(config, "workerinput"):  # an xdist worker (not the env variable: a nested pytest inherits it)
         return
     config.stash[SAL_SESSION].terminal_summary(terminalreporter)
 
 
 @pytest.hookimpl(trylast=True)
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
-    if os.environ.get("PYTEST_XDIST_WORKER"):
+    if hasattr(session.config, "workerinput"):
         return
     session.config.stash[SAL_SESSION].finish()
 

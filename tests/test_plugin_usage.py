@@ -1,0 +1,98 @@
+"""Misuse of the decorators and marks, and the plugin's options, end to end (inner pytest
+sessions, with and without ``-n 2``): every mistake is reported with what to write instead."""
+
+from __future__ import annotations
+
+import pytest
+from plugin_suites import CONFTEST, HEADER, MODES, calls, run
+
+# -- misuse is reported with what to write instead ----------------------------------------
+IMPORT_ERRORS = {
+    "test_not_searchable": (
+        "@sal.require(tracking_rate >= 0.5, fog.heterogeneity >= 0.1)\ndef test_x(sal_outcome): pass\n",
+        "*fog.heterogeneity is not searchable, so it cannot be an envelope; searchable parameters of fog: visibility_m*",
+    ),
+    "test_two_envelopes": (
+        "@sal.require(tracking_rate >= 0.5, fog.visibility_m >= 25, rain.intensity_mm_h <= 10)\ndef test_x(sal_outcome): pass\n",
+        ("*sal.require() searches one parameter; got 2 envelopes (fog.visibility_m >= 25 m, rain.intensity_mm_h <= 10 mm/h). "
+         "Write one test per parameter, or chain the modules*"),
+    ),
+    "test_metric_vs_string": (
+        "@sal.require(tracking_rate >= 'high', fog.visibility_m >= 25)\ndef test_x(sal_outcome): pass\n",
+        "*tracking_rate >= 'high': compare a metric with a finite number in its unit, e.g. tracking_rate >= 0.95*",
+    ),
+    "test_sweep_without_trial": (
+        "@sal.sweep(fog.visibility_m, L=100)\n@sal.require(tracking_rate >= 0.5)\ndef test_x(sal_outcome): pass\n",
+        "*test_x: sal.sweep / sal.at tests take the sal_trial fixture (def test_x(sal_trial): ...)*",
+    ),
+}
+
+SESSION_ERRORS = {  # reported once every item is collected
+    "sweep_without_require": (
+        "@sal.sweep(fog.visibility_m, L=100)\ndef test_x(sal_trial): pass\n",
+        "*test_suite.py::test_x*: sal.sweep / sal.at need a sal.require(...) below them with the criteria each level must meet*",
+    ),
+    "require_without_envelope": (
+        "@sal.require(tracking_rate >= 0.5)\ndef test_x(sal_outcome): pass\n",
+        ("*test_suite.py::test_x: InvalidRequirement: sal.require(tracking_rate >= 0.5) has no parameter bound to search; "
+         "add one (fog.visibility_m >= 25) or put sal.sweep(...) / sal.at(...) above it*"),
+    ),
+    "sweep_with_envelope": (
+        "@sal.sweep(fog.visibility_m, L=100)\n@sal.require(tracking_rate >= 0.5, fog.visibility_m >= 25)\ndef test_x(sal_trial): pass\n",
+        "*test_suite.py::test_x*: sal.sweep / sal.at run fixed levels; drop the envelope fog.visibility_m >= 25 m from sal.require*",
+    ),
+}
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_misuse_at_import_is_a_collection_error_saying_what_to_write(pytester: pytest.Pytester, mode: list[str]) -> None:
+    pytester.makeconftest(CONFTEST)
+    pytester.makepyfile(**{name: HEADER + body for name, (body, _) in IMPORT_ERRORS.items()})
+    result = run(pytester, mode)
+    # without xdist: "Interrupted: 4 errors during collection"; with it each worker reports them
+    assert result.ret == (pytest.ExitCode.TESTS_FAILED if mode else pytest.ExitCode.INTERRUPTED)
+    assert result.parseoutcomes()["errors"] == len(IMPORT_ERRORS) * (2 if mode else 1)
+    for name, (_, message) in IMPORT_ERRORS.items():
+        result.stdout.fnmatch_lines([f"*ERROR collecting {name}.py*", message])
+    assert calls(pytester) == 0
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_misuse_of_marks_is_a_usage_error_saying_what_to_write(pytester: pytest.Pytester, mode: list[str]) -> None:
+    pytester.makeconftest(CONFTEST)
+    if mode:  # xdist workers error each misused test at setup with the message
+        pytester.makepyfile(**{f"test_{case}": HEADER + body for case, (body, _) in SESSION_ERRORS.items()})
+        result = run(pytester, mode)
+        result.assert_outcomes(errors=len(SESSION_ERRORS))
+        for case, (_, message) in SESSION_ERRORS.items():
+            result.stdout.fnmatch_lines([message.replace("test_suite.py", f"test_{case}.py")])
+    else:  # a UsageError: the session stops before running anything
+        for case, (body, message) in SESSION_ERRORS.items():
+            path = pytester.makepyfile(test_suite=HEADER + body)
+            result = run(pytester, mode)
+            assert result.ret == pytest.ExitCode.USAGE_ERROR
+            result.stderr.fnmatch_lines(["ERROR: " + message.lstrip("*")])
+            path.unlink()
+    assert calls(pytester) == 0
+
+
+# -- options -----------------------------------------------------------------------------
+@pytest.mark.parametrize("mode", MODES)
+def test_help_lists_the_options_and_a_bad_check_is_a_usage_error(pytester: pytest.Pytester, mode: list[str]) -> None:
+    helped = run(pytester, mode, "--help")
+    assert helped.ret == 0
+    helped.stdout.fnmatch_lines(
+        [
+            "SLAM robustness (pytest-sal):",
+            "*--sal-cache-dir=DIR*trial cache folder*",
+            "*--sal-no-cache*",
+            "*--sal-history-dir=DIR*",
+            "*--sal-compare-fail=CHECK*",
+            "*--sal-report-md=FILE*",
+            "*--sal-report-html=DIR*",
+        ]
+    )
+    helped.stdout.fnmatch_lines(["*sal_tolerance (string):*", "*sal_max_trials (string):*", "*sal_system (string):*"])
+    bad = run(pytester, mode, "--sal-compare-fail=foo")
+    assert bad.ret == pytest.ExitCode.USAGE_ERROR
+    bad.stderr.fnmatch_lines(["*--sal-compare-fail: 'foo': expected WHAT:LIMIT; valid forms: boundary:10% *boundary:2.5 *METRIC:0.2*"])
