@@ -45,6 +45,9 @@ def add_options(parser: pytest.Parser) -> None:
                     help="evict least-recently-used cache entries above SIZE (e.g. 5GB; ini sal_cache_size). Default: no limit")
     group.addoption("--sal-no-cache", dest="sal_no_cache", action="store_true", default=False,
                     help="run every trial, reading and writing no cache. Default: %(default)r")
+    group.addoption("--sal-cache-frames", dest="sal_cache_frames", action="store_true", default=False,
+                    help="also store each perturbed sequence in the cache (dataset layout) and run systems on the copy: "
+                    "perturb once for several systems or sessions. Default: %(default)r")
     group.addoption("--sal-history-dir", dest="sal_history_dir", metavar="DIR", default=None,
                     help="history store (ini sal_history_dir). Default: .sal/history under the rootdir")
     group.addoption("--sal-no-history", dest="sal_no_history", action="store_true", default=False,
@@ -160,7 +163,7 @@ class SalSession:
         seed = int(requirement.options.get("seed", self.seed))
         return TrialRunner(
             dataset, ref, system, requirement, runs=runs, seed=seed, cache=self.cache, workdir=workdir, timeout=self.timeout,
-            artifacts=bool(self.config.option.sal_report_html),
+            artifacts=bool(self.config.option.sal_report_html), cache_frames=bool(self.config.option.sal_cache_frames),
         )
 
     def search(self, item: pytest.Item, dataset: Any, system: Any, runs: int, workdir: Path) -> Any:
