@@ -1,0 +1,671 @@
+"""Experiment configs (the SAL YAML schema, validated up front) and ``sal perturb CONFIG``.
+
+The schema is the paper's (``experiment``, ``dataset``, ``perturbations`` with ``composite``,
+``output``, ``robustness_boundary``), with what was broken there fixed:
+
+* an unknown key, a wrong type, an unknown module or parameter, or an out-of-range value is one
+  ``ConfigError`` naming the file and the key's path (``perturbations[1].parameters.visibility_m``)
+  and what is allowed; YAML syntax errors and duplicate keys name the line;
+* ``experiment.seed`` really seeds every perturbation;
+* validation creates nothing; ``--dry-run`` only prints the plan;
+* each perturbation is written to ``images/<name>/`` by its exact name.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import shutil
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from sal_adapters import DATASETS, SalError, Sequence, open_dataset, write_sequence
+from sal_adapters.datasets import WRITTEN_MARKER
+from sal_modules import (
+    PERTURBATIONS,
+    Composite,
+    Param,
+    ParameterError,
+    Perturbation,
+    module_class,
+    perturb,
+)
+
+__all__ = [
+    "BoundaryConfig",
+    "ConfigError",
+    "DatasetConfig",
+    "ExperimentConfig",
+    "ExperimentInfo",
+    "OutputConfig",
+    "PerturbationConfig",
+    "StepConfig",
+    "add_experiment_commands",
+    "build_modules",
+    "build_sequence",
+    "load_config",
+    "parse_config",
+    "run_perturb",
+]
+
+SAFE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
+SAFE_NAME_TEXT = "letters, digits, '_', '-', '.' (not first)"
+
+
+class ConfigError(SalError, ValueError):
+    """One problem in an experiment config: ``FILE: key.path: message (allowed: ...)``."""
+
+    def __init__(self, source: str, where: str, message: str):
+        self.source = source
+        self.where = where
+        super().__init__(f"{source}: {where}: {message}" if where else f"{source}: {message}")
+
+
+# ------------------------------------------------------------------------------ the schema
+
+
+@dataclass(frozen=True)
+class ExperimentInfo:
+    name: str
+    description: str = ""
+    version: str = "1.0.0"
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class DatasetConfig:
+    type: str
+    path: Path | None = None
+    sequence: str | None = None
+    max_frames: int | None = None
+    start: int = 0
+    stereo: bool = False
+    options: Mapping[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class StepConfig:
+    """One child of a composite perturbation."""
+
+    type: str
+    parameters: Mapping[str, Any] = field(default_factory=dict)
+    name: str | None = None
+
+
+@dataclass(frozen=True)
+class PerturbationConfig:
+    name: str
+    type: str  # a registered module, "none" or "composite"
+    enabled: bool = True
+    parameters: Mapping[str, Any] = field(default_factory=dict)
+    modules: tuple[StepConfig, ...] = ()  # composite only
+
+
+@dataclass(frozen=True)
+class OutputConfig:
+    base_dir: Path = Path("results")
+    create_timestamp_dir: bool = False
+
+
+@dataclass(frozen=True)
+class BoundaryConfig:
+    target_perturbation: str
+    parameter: str
+    lower_bound: float
+    upper_bound: float
+    enabled: bool = False
+    name: str = ""
+    module: str = ""
+    tolerance: float = 0.05
+    max_iters: int = 8
+    ate_rmse_fail: float = 1.5
+    fail_on_tracking_failure: bool = True
+
+
+@dataclass(frozen=True)
+class ExperimentConfig:
+    source: str
+    experiment: ExperimentInfo
+    dataset: DatasetConfig
+    perturbations: tuple[PerturbationConfig, ...]
+    output: OutputConfig
+    robustness_boundary: BoundaryConfig | None = None
+    text: str = ""  # the config file as read (copied into the output)
+
+    def output_dir(self, now: datetime | None = None) -> Path:
+        """``<base_dir>/<experiment.name>[_<timestamp>]``."""
+        name = self.experiment.name
+        if self.output.create_timestamp_dir:
+            name += "_" + (now or datetime.now()).strftime("%Y%m%d_%H%M%S")
+        return self.output.base_dir / name
+
+    def enabled(self) -> list[PerturbationConfig]:
+        return [p for p in self.perturbations if p.enabled]
+
+
+# ------------------------------------------------------------------------------ loading
+
+_TOP = ("experiment", "dataset", "perturbations", "output", "robustness_boundary")
+_EXPERIMENT = ("name", "description", "version", "seed")
+_DATASET = ("type", "path", "sequence", "max_frames", "start", "stereo", "options")
+_PERTURBATION = ("name", "type", "enabled", "parameters")
+_STEP = ("name", "type", "parameters")
+_COMPOSITE = ("mode", "modules")
+_OUTPUT = ("base_dir", "create_timestamp_dir")
+_BOUNDARY = (
+    "enabled", "name", "target_perturbation", "module", "parameter", "lower_bound", "upper_bound",
+    "tolerance", "max_iters", "ate_rmse_fail", "fail_on_tracking_failure",
+)
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """SafeLoader that refuses a key given twice in one mapping."""
+
+
+def _construct_mapping(loader: yaml.SafeLoader, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
+    seen: dict[Any, int] = {}
+    for key_node, _ in node.value:
+        key = loader.construct_object(key_node, deep=deep)
+        if key in seen:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"key {key!r} appears twice (first on line {seen[key] + 1})", key_node.start_mark
+            )
+        seen[key] = key_node.start_mark.line
+    return loader.construct_mapping(node, deep=deep)
+
+
+_UniqueKeyLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
+
+
+def load_config(path: str | os.PathLike[str]) -> ExperimentConfig:
+    """Read and validate the experiment config at ``path`` (nothing is created)."""
+    source = str(path)
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError(source, "", "config file not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(source, "", f"cannot read the config: {exc}") from None
+    return parse_config(text, source)
+
+
+def parse_config(text: str, source: str = "<config>") -> ExperimentConfig:
+    """Validate the YAML ``text`` (``source`` names it in errors)."""
+    try:
+        data = yaml.load(text, Loader=_UniqueKeyLoader)  # a SafeLoader subclass
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
+        line = f":{mark.line + 1}" if mark is not None else ""
+        problem = getattr(exc, "problem", None) or str(exc)
+        raise ConfigError(f"{source}{line}", "", f"YAML syntax error: {problem}") from None
+    return _Parser(source).config(data, text)
+
+
+def _type_name(value: Any) -> str:
+    if value is None:
+        return "null"
+    return {bool: "a boolean", int: "an integer", float: "a number", str: "a string", list: "a list", dict: "a mapping"}.get(
+        type(value), type(value).__name__
+    )
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+class _Parser:
+    def __init__(self, source: str):
+        self.source = source
+
+    def error(self, where: str, message: str) -> ConfigError:
+        return ConfigError(self.source, where, message)
+
+    # -- generic helpers
+    def mapping(self, value: Any, where: str, known: tuple[str, ...], required: tuple[str, ...] = ()) -> dict[str, Any]:
+        if not isinstance(value, dict):
+            raise self.error(where or "top level", f"must be a mapping with keys {', '.join(known)}; got {_type_name(value)}")
+        prefix = f"{where}." if where else ""
+        for key in value:
+            if key not in known:
+                raise self.error(f"{prefix}{key}", f"unknown key; known: {', '.join(known)}")
+        for key in required:
+            if value.get(key) is None:
+                raise self.error(f"{prefix}{key}", "is required")
+        return value
+
+    def typed(self, value: Any, where: str, kind: str, *, optional: bool = False, minimum: float | None = None) -> Any:
+        if value is None and optional:
+            return None
+        ok = {
+            "str": isinstance(value, str),
+            "bool": isinstance(value, bool),
+            "int": isinstance(value, int) and not isinstance(value, bool),
+            "number": _is_number(value),
+            "dict": isinstance(value, dict),
+            "list": isinstance(value, list),
+        }[kind]
+        words = {"str": "a string", "bool": "true or false", "int": "an integer", "number": "a number", "dict": "a mapping", "list": "a list"}[kind]
+        if minimum is not None:
+            words += f" >= {minimum:g}"
+        if optional:
+            words += " or null"
+        if not ok or (minimum is not None and value < minimum):
+            raise self.error(where, f"{value!r} is not valid; must be {words}")
+        return float(value) if kind == "number" else value
+
+    def safe_name(self, value: Any, where: str) -> str:
+        self.typed(value, where, "str")
+        if not SAFE_NAME.match(value):
+            raise self.error(where, f"{value!r} cannot be a folder name; use {SAFE_NAME_TEXT}")
+        return value
+
+    # -- sections
+    def config(self, data: Any, text: str) -> ExperimentConfig:
+        if data is None:
+            raise self.error("", "the config is empty; it needs the sections experiment, dataset, perturbations, output")
+        top = self.mapping(data, "", _TOP, required=("experiment", "dataset"))
+        experiment = self.experiment(top["experiment"])
+        dataset = self.dataset(top["dataset"])
+        perturbations = self.perturbations(top.get("perturbations"))
+        output = self.output(top.get("output"))
+        boundary = self.boundary(top.get("robustness_boundary"), perturbations)
+        return ExperimentConfig(self.source, experiment, dataset, perturbations, output, boundary, text)
+
+    def experiment(self, value: Any) -> ExperimentInfo:
+        d = self.mapping(value, "experiment", _EXPERIMENT, required=("name",))
+        version = d.get("version", "1.0.0")
+        if _is_number(version):
+            version = str(version)
+        return ExperimentInfo(
+            name=self.safe_name(d["name"], "experiment.name"),
+            description=self.typed(d.get("description", ""), "experiment.description", "str"),
+            version=self.typed(version, "experiment.version", "str"),
+            seed=self.typed(d.get("seed", 0), "experiment.seed", "int", minimum=0),
+        )
+
+    def dataset(self, value: Any) -> DatasetConfig:
+        d = self.mapping(value, "dataset", _DATASET, required=("type",))
+        kind = self.typed(d["type"], "dataset.type", "str")
+        names = DATASETS.names()
+        if kind not in names:
+            raise self.error("dataset.type", f"unknown dataset kind {kind!r}; known: {', '.join(names)}")
+        allowed = DATASETS.get(kind).option_names()
+        path = self.typed(d.get("path"), "dataset.path", "str", optional=True)
+        folder = None
+        if path is not None:
+            folder = Path(os.path.expandvars(path)).expanduser()
+            if not folder.is_dir():
+                what = "is not a folder" if folder.exists() else "does not exist"
+                raise self.error("dataset.path", f"{str(folder)!r} {what}; give the dataset folder")
+        elif kind != "synthetic":
+            raise self.error("dataset.path", f"is required for dataset kind {kind!r}")
+        sequence = d.get("sequence")
+        if _is_number(sequence) and kind == "kitti":
+            sequence = f"{int(sequence):02d}"
+        sequence = self.typed(sequence, "dataset.sequence", "str", optional=True)
+        stereo = self.typed(d.get("stereo", False), "dataset.stereo", "bool")
+        options = dict(self.typed(d.get("options") or {}, "dataset.options", "dict"))
+        for key in options:
+            if key not in allowed or key in ("sequence", "stereo"):
+                rest = [a for a in allowed if a not in ("sequence", "stereo")]
+                raise self.error(f"dataset.options.{key}", f"unknown option of dataset kind {kind!r}; known: {', '.join(rest) or 'none'}")
+        for key, given in (("sequence", sequence), ("stereo", stereo or None)):
+            if given is not None and key not in allowed:
+                raise self.error(f"dataset.{key}", f"dataset kind {kind!r} has no {key} option; its options: {', '.join(allowed) or 'none'}")
+        return DatasetConfig(
+            type=kind,
+            path=folder,
+            sequence=sequence,
+            max_frames=self.typed(d.get("max_frames"), "dataset.max_frames", "int", optional=True, minimum=1),
+            start=self.typed(d.get("start", 0), "dataset.start", "int", minimum=0),
+            stereo=stereo,
+            options=options,
+        )
+
+    def perturbations(self, value: Any) -> tuple[PerturbationConfig, ...]:
+        if value is None or value == []:
+            return (PerturbationConfig(name="baseline", type="none"),)
+        self.typed(value, "perturbations", "list")
+        found: list[PerturbationConfig] = []
+        seen: dict[str, int] = {}
+        for i, item in enumerate(value):
+            where = f"perturbations[{i}]"
+            d = self.mapping(item, where, _PERTURBATION, required=("name", "type"))
+            name = self.safe_name(d["name"], f"{where}.name")
+            if name in seen:
+                raise self.error(f"{where}.name", f"{name!r} is already the name of perturbations[{seen[name]}]; names must be unique (they are folder names)")
+            seen[name] = i
+            kind = self.typed(d["type"], f"{where}.type", "str")
+            enabled = self.typed(d.get("enabled", True), f"{where}.enabled", "bool")
+            params = self.typed(d.get("parameters") or {}, f"{where}.parameters", "dict")
+            if kind == "none":
+                if params:
+                    raise self.error(f"{where}.parameters", "type none (the clean sequence) takes no parameters")
+                found.append(PerturbationConfig(name, kind, enabled))
+            elif kind == "composite":
+                steps = self.composite(params, f"{where}.parameters")
+                found.append(PerturbationConfig(name, kind, enabled, dict(params), steps))
+            else:
+                self.module(kind, params, where)
+                found.append(PerturbationConfig(name, kind, enabled, dict(params)))
+        return tuple(found)
+
+    def module(self, kind: str, params: dict[str, Any], where: str) -> Perturbation:
+        names = [n for n in PERTURBATIONS.names() if n != "composite"]
+        if kind not in names:
+            raise self.error(f"{where}.type", f"unknown perturbation module {kind!r}; known: none, composite, {', '.join(names)}")
+        cls = module_class(kind)
+        specs = cls.parameters()
+        for key, value in params.items():
+            if key not in specs:
+                raise self.error(f"{where}.parameters.{key}", f"{kind} has no such parameter; parameters: {', '.join(specs) or 'none'}")
+            spec = specs[key]
+            try:
+                spec.validate(value, kind)
+            except ParameterError:
+                shown = f"{value!r}{' ' + spec.unit if spec.unit and _is_number(value) else ''}"
+                raise self.error(f"{where}.parameters.{key}", f"{shown} is not valid; {key} must be {spec.allowed()}") from None
+        try:
+            return cls(**params)
+        except ParameterError as exc:
+            raise self.error(f"{where}.parameters", str(exc)) from None
+
+    def composite(self, params: dict[str, Any], where: str) -> tuple[StepConfig, ...]:
+        d = self.mapping(params, where, _COMPOSITE, required=("modules",))
+        mode = d.get("mode", "sequential")
+        if mode != "sequential":
+            raise self.error(f"{where}.mode", f"{mode!r} is not valid; the only mode is 'sequential'")
+        modules = self.typed(d["modules"], f"{where}.modules", "list")
+        if not modules:
+            raise self.error(f"{where}.modules", "must list at least one module")
+        steps = []
+        for j, item in enumerate(modules):
+            at = f"{where}.modules[{j}]"
+            s = self.mapping(item, at, _STEP, required=("type",))
+            kind = self.typed(s["type"], f"{at}.type", "str")
+            if kind in ("none", "composite"):
+                raise self.error(f"{at}.type", f"{kind!r} cannot be a step of a composite; use a perturbation module")
+            step_params = self.typed(s.get("parameters") or {}, f"{at}.parameters", "dict")
+            self.module(kind, step_params, at)
+            name = self.typed(s.get("name"), f"{at}.name", "str", optional=True)
+            steps.append(StepConfig(kind, dict(step_params), name))
+        return tuple(steps)
+
+    def output(self, value: Any) -> OutputConfig:
+        d = self.mapping(value if value is not None else {}, "output", _OUTPUT)
+        base = self.typed(d.get("base_dir", "results"), "output.base_dir", "str")
+        return OutputConfig(
+            base_dir=Path(os.path.expandvars(base)).expanduser(),
+            create_timestamp_dir=self.typed(d.get("create_timestamp_dir", False), "output.create_timestamp_dir", "bool"),
+        )
+
+    def boundary(self, value: Any, perturbations: tuple[PerturbationConfig, ...]) -> BoundaryConfig | None:
+        if value is None:
+            return None
+        w = "robustness_boundary"
+        d = self.mapping(value, w, _BOUNDARY, required=("target_perturbation", "parameter", "lower_bound", "upper_bound"))
+        target = self.typed(d["target_perturbation"], f"{w}.target_perturbation", "str")
+        by_name = {p.name: p for p in perturbations}
+        if target not in by_name:
+            raise self.error(f"{w}.target_perturbation", f"{target!r} is not a perturbation of this config; perturbations: {', '.join(by_name)}")
+        pert = by_name[target]
+        if pert.type == "none":
+            raise self.error(f"{w}.target_perturbation", f"{target!r} is the clean sequence (type none); it has no parameter to search")
+        parameter = self.typed(d["parameter"], f"{w}.parameter", "str")
+        module = build_module(pert)
+        assert module is not None
+        if isinstance(module, Composite):
+            try:
+                position, spec = module.param(parameter)
+            except ParameterError:
+                addresses = [a for a, (_, p) in module.addresses().items() if p.searchable and "@" not in a and "." in a]
+                raise self.error(f"{w}.parameter", f"composite {target!r} has no parameter {parameter!r}; searchable: {', '.join(addresses) or 'none'}") from None
+            owner = module.steps[position].name
+        else:
+            spec = type(module).parameters().get(parameter)  # type: ignore[assignment]
+            owner = module.name
+        searchable = [a for a, (_, p) in module.addresses().items() if p.searchable and "@" not in a and "." in a] if isinstance(module, Composite) else list(type(module).searchable())
+        if spec is None or not spec.searchable:
+            raise self.error(f"{w}.parameter", f"{parameter!r} is not a searchable parameter of {target!r} ({module.name}); searchable: {', '.join(searchable) or 'none'}")
+        declared = self.typed(d.get("module", ""), f"{w}.module", "str")
+        if declared and declared != owner:
+            raise self.error(f"{w}.module", f"{declared!r} does not match the module of {parameter!r} in {target!r}, which is {owner!r}")
+        scale = spec.search_space()
+        unit = f" {scale.unit}" if scale.unit else ""
+        allowed = f"{'an integer' if scale.domain == 'integer' else 'a number'} in {scale.min:g} .. {scale.max:g}{unit}"
+        bounds = {}
+        for key in ("lower_bound", "upper_bound"):
+            v = d[key]
+            ok = _is_number(v) and scale.min <= v <= scale.max and (scale.domain != "integer" or float(v).is_integer())
+            if not ok:
+                raise self.error(f"{w}.{key}", f"{v!r}{unit if _is_number(v) else ''} is not valid; {parameter} search values must be {allowed}")
+            bounds[key] = int(v) if scale.domain == "integer" else float(v)
+        if not bounds["lower_bound"] < bounds["upper_bound"]:
+            raise self.error(f"{w}.upper_bound", f"{bounds['upper_bound']:g} must be greater than lower_bound {bounds['lower_bound']:g}")
+        tolerance = self.typed(d.get("tolerance", 0.05), f"{w}.tolerance", "number")
+        if tolerance <= 0:
+            raise self.error(f"{w}.tolerance", f"{tolerance:g} is not valid; must be a number > 0{unit}")
+        fail = self.typed(d.get("ate_rmse_fail", 1.5), f"{w}.ate_rmse_fail", "number")
+        if fail <= 0:
+            raise self.error(f"{w}.ate_rmse_fail", f"{fail:g} m is not valid; must be a number > 0 m")
+        name = d.get("name") or f"{target}_{parameter.replace('.', '_')}"
+        return BoundaryConfig(
+            target_perturbation=target,
+            parameter=parameter,
+            lower_bound=bounds["lower_bound"],
+            upper_bound=bounds["upper_bound"],
+            enabled=self.typed(d.get("enabled", False), f"{w}.enabled", "bool"),
+            name=self.safe_name(name, f"{w}.name"),
+            module=owner,
+            tolerance=tolerance,
+            max_iters=self.typed(d.get("max_iters", 8), f"{w}.max_iters", "int", minimum=1),
+            ate_rmse_fail=fail,
+            fail_on_tracking_failure=self.typed(d.get("fail_on_tracking_failure", True), f"{w}.fail_on_tracking_failure", "bool"),
+        )
+
+
+# ------------------------------------------------------------------------------ building
+
+
+def build_sequence(config: ExperimentConfig) -> Sequence:
+    """The clean sequence the config names (a dataset error names the config and the key)."""
+    ds = config.dataset
+    options = dict(ds.options)
+    if ds.sequence is not None:
+        options["sequence"] = ds.sequence
+    if ds.stereo:
+        options["stereo"] = True
+    try:
+        return open_dataset(ds.type, ds.path, start=ds.start, max_frames=ds.max_frames, **options)
+    except SalError as exc:
+        raise ConfigError(config.source, "dataset", str(exc)) from None
+
+
+def build_module(pert: PerturbationConfig) -> Perturbation | None:
+    """The module of one perturbation (``None`` for type none)."""
+    if pert.type == "none":
+        return None
+    if pert.type == "composite":
+        return Composite([module_class(s.type)(**s.parameters) for s in pert.modules])
+    return module_class(pert.type)(**pert.parameters)
+
+
+def build_modules(config: ExperimentConfig) -> dict[str, Perturbation | None]:
+    """The module of each enabled perturbation by name (``None``: the clean sequence)."""
+    return {p.name: build_module(p) for p in config.enabled()}
+
+
+def _describe(module: Perturbation | None) -> str:
+    if module is None:
+        return "clean sequence"
+    steps = module.steps if isinstance(module, Composite) else (module,)
+    parts = []
+    for step in steps:
+        specs = step.parameters()
+        values = ", ".join(f"{k}={_fmt(v)}{' ' + specs[k].unit if specs[k].unit and v is not None else ''}" for k, v in step.params.items())
+        parts.append(f"{step.name}({values})")
+    return " >> ".join(parts)
+
+
+def _fmt(value: Any) -> str:
+    if isinstance(value, float):
+        return f"{value:g}"
+    if value is None:
+        return "null"
+    if isinstance(value, tuple):
+        return "(" + ", ".join(_fmt(v) for v in value) + ")"
+    return repr(value) if isinstance(value, str) else str(value)
+
+
+def _boundary_param(config: ExperimentConfig, rb: BoundaryConfig) -> Param:
+    pert = next(p for p in config.perturbations if p.name == rb.target_perturbation)
+    module = build_module(pert)
+    if isinstance(module, Composite):
+        return module.param(rb.parameter)[1]
+    return type(module).parameters()[rb.parameter]
+
+
+# ------------------------------------------------------------------------------ sal perturb
+
+
+def run_perturb(config: ExperimentConfig, *, dry_run: bool = False, cache_dir: Path | None = None, out: Any = None) -> dict[str, Any]:
+    """Validate everything, then (unless ``dry_run``) write each enabled perturbation under
+    ``<base_dir>/<name>/images/<perturbation>/``; returns the results written to
+    ``pipeline_results.json`` (or the plan)."""
+    import sys
+
+    from pytest_sal.cache import ContentCache, cache_key, default_cache_dir
+
+    out = out or sys.stdout
+    clean = build_sequence(config)
+    modules = build_modules(config)
+    seed = config.experiment.seed
+    perturbed: dict[str, Sequence] = {}
+    for name, module in modules.items():
+        try:
+            perturbed[name] = clean if module is None else perturb(clean, module, seed=seed)
+        except SalError as exc:
+            index = next(i for i, p in enumerate(config.perturbations) if p.name == name)
+            raise ConfigError(config.source, f"perturbations[{index}]", str(exc)) from None
+    root = config.output_dir()
+    print(f"experiment  {config.experiment.name} (seed {seed})", file=out)
+    print(f"dataset     {config.dataset.type} {clean.name}: {len(clean)} frames, {clean.sensor}, {clean.fps:.3g} Hz", file=out)
+    print(f"output      {root}", file=out)
+    width = max([len(n) for n in modules] + [12])
+    for name, module in modules.items():
+        print(f"  {name:{width}s} {_describe(module)}\n  {'':{width}s} -> {root / 'images' / name}", file=out)
+    disabled = [p.name for p in config.perturbations if not p.enabled]
+    if disabled:
+        print(f"  disabled: {', '.join(disabled)}", file=out)
+    rb = config.robustness_boundary
+    if rb is not None:
+        state = "enabled" if rb.enabled else "disabled"
+        spec = _boundary_param(config, rb)
+        unit = f" {spec.search_space().unit}" if spec.search_space().unit else ""
+        print(f"boundary    {rb.name} ({state}): {rb.target_perturbation}.{rb.parameter} in {rb.lower_bound:g} .. {rb.upper_bound:g}{unit}, "
+              f"tolerance {rb.tolerance:g}, max_iters {rb.max_iters}, ate_rmse_fail {rb.ate_rmse_fail:g} m", file=out)
+    if dry_run:
+        print("dry run: nothing written", file=out)
+        return {"dry_run": True, "output_dir": str(root), "perturbations": list(modules)}
+
+    images = root / "images"
+    for name in perturbed:
+        target = images / name
+        if target.exists() and (not target.is_dir() or (any(target.iterdir()) and not (target / WRITTEN_MARKER).is_file())):
+            raise ConfigError(config.source, "output.base_dir", f"{target} exists and was not written by sal perturb; move it or choose another base_dir")
+    cache = ContentCache(cache_dir if cache_dir is not None else default_cache_dir())
+    results: dict[str, Any] = {
+        "experiment": config.experiment.name,
+        "seed": seed,
+        "dataset": {"type": config.dataset.type, "name": clean.name, "frames": len(clean)},
+        "status": "running",
+        "perturbations": {},
+    }
+    all_indices = [int(r.index) for r in clean.records]
+    for name, seq in perturbed.items():
+        module = modules[name]
+        started = time.perf_counter()
+
+        def fill(target: Path, seq: Sequence = seq) -> None:
+            write_sequence(seq, target, progress=True)
+
+        folder, was_cached = cache.compute_dir(cache_key(frames=seq.fingerprint), fill)
+        target = images / name
+        if target.exists():
+            shutil.rmtree(target)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copytree(folder, target)
+        kept = {int(r.index) for r in seq.records}
+        dropped = [i for i in all_indices if i not in kept]
+        if dropped:
+            (target / "dropped_frames.txt").write_text(
+                f"# frames of {clean.name} dropped by {name} (dataset frame indices)\n" + "".join(f"{i}\n" for i in dropped)
+            )
+        results["perturbations"][name] = {
+            "type": next(p.type for p in config.perturbations if p.name == name),
+            "module": None if module is None else module.to_dict(),
+            "frames_in": len(clean),
+            "frames_kept": len(seq),
+            "dropped_frames": dropped,
+            "seconds": round(time.perf_counter() - started, 4),
+            "cached": was_cached,
+            "output": str(target),
+        }
+    results["status"] = "completed"
+    (root / "pipeline_results.json").write_text(json.dumps(results, indent=2) + "\n")
+    (root / "config.yaml").write_text(config.text)
+
+    labels = {
+        name: "none" if module is None else (module.label() if isinstance(module, Composite) else module.name)
+        for name, module in modules.items()
+    }
+    lw = max([len(v) for v in labels.values()] + [6])
+    print(f"\n  {'perturbation':{width}s} {'module':{lw}s} {'kept':>9s} {'ms/frame':>9s} {'total s':>8s}", file=out)
+    for name, r in results["perturbations"].items():
+        label = labels[name]
+        per_frame = 1000 * r["seconds"] / max(1, r["frames_in"])
+        note = " (cached)" if r["cached"] else ""
+        print(f"  {name:{width}s} {label:{lw}s} {r['frames_kept']:>4d}/{r['frames_in']:<4d} {per_frame:9.1f} {r['seconds']:8.2f}{note}", file=out)
+    print(f"wrote {root}", file=out)
+    return results
+
+
+EPILOG = """\
+examples:
+  sal perturb example_suites/configs/fog_rain_urban.yaml --dry-run
+  sal perturb example_suites/configs/indoor_camera.yaml --cache-dir /tmp/sal-cache
+
+Writes <base_dir>/<experiment.name>/images/<perturbation>/ in the dataset's own layout, plus
+pipeline_results.json and a copy of the config. Perturbed sequences are kept in the content
+cache (default .sal/cache), so a second run copies them.
+"""
+
+
+def add_experiment_commands(commands: argparse._SubParsersAction) -> None:
+    """Add ``perturb`` to the ``sal`` subcommands."""
+    cmd = commands.add_parser(
+        "perturb",
+        help="validate an experiment config and write each perturbed sequence",
+        description="Validate the experiment config (every error names the key), then write each\n"
+        "enabled perturbation's sequence under <base_dir>/<name>/images/<perturbation>/.",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    cmd.add_argument("config", type=Path, metavar="CONFIG", help="experiment YAML")
+    cmd.add_argument("--dry-run", action="store_true", help="validate and print the plan; write nothing")
+    cmd.add_argument("--cache-dir", type=Path, metavar="DIR", help="content cache (default: .sal/cache)")
+    cmd.set_defaults(run=_run_perturb)
+
+
+def _run_perturb(args: argparse.Namespace) -> int:
+    config = load_config(args.config)
+    run_perturb(config, dry_run=args.dry_run, cache_dir=args.cache_dir)
+    return 0

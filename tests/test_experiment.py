@@ -1,0 +1,296 @@
+"""Experiment configs (validation up front, one error naming the key) and ``sal perturb``."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+
+from pytest_sal.cli import main
+from pytest_sal.experiment import (
+    ConfigError,
+    build_modules,
+    build_sequence,
+    load_config,
+)
+from sal_adapters import open_dataset
+from sal_modules import Composite
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "example_suites" / "configs"
+FRAMES = 6
+
+
+def base_config(tmp_path: Path, **changes: Any) -> dict[str, Any]:
+    config: dict[str, Any] = {
+        "experiment": {"name": "exp", "seed": 0},
+        "dataset": {"type": "synthetic", "max_frames": FRAMES, "options": {"scene": "urban", "frames": FRAMES}},
+        "perturbations": [
+            {"name": "rain", "type": "rain", "parameters": {"intensity_mm_h": 40}},
+            {"name": "fog", "type": "fog", "parameters": {"visibility_m": 50}},
+            {
+                "name": "combo",
+                "type": "composite",
+                "parameters": {"modules": [{"type": "rain", "parameters": {"intensity_mm_h": 5}}, {"type": "fog", "parameters": {"visibility_m": 80}}]},
+            },
+        ],
+        "output": {"base_dir": str(tmp_path / "out")},
+        "robustness_boundary": {
+            "enabled": True, "target_perturbation": "fog", "parameter": "visibility_m",
+            "lower_bound": 10, "upper_bound": 200, "tolerance": 5, "max_iters": 4, "ate_rmse_fail": 1.0,
+        },
+    }
+    config.update(changes)
+    return config
+
+
+def write(tmp_path: Path, config: dict[str, Any] | str, name: str = "exp.yaml") -> Path:
+    path = tmp_path / name
+    path.write_text(config if isinstance(config, str) else yaml.safe_dump(config, sort_keys=False))
+    return path
+
+
+def error_of(tmp_path: Path, config: dict[str, Any] | str) -> str:
+    path = write(tmp_path, config)
+    with pytest.raises(ConfigError) as info:
+        load_config(path)
+    return str(info.value)
+
+
+def test_valid_config_loads_into_frozen_dataclasses(tmp_path: Path) -> None:
+    config = load_config(write(tmp_path, base_config(tmp_path)))
+    assert config.experiment.seed == 0 and config.dataset.type == "synthetic"
+    assert [p.name for p in config.perturbations] == ["rain", "fog", "combo"]
+    assert config.perturbations[2].modules[1].type == "fog"
+    assert config.robustness_boundary is not None and config.robustness_boundary.module == "fog"
+    assert config.output_dir() == tmp_path / "out" / "exp"
+    with pytest.raises(AttributeError):
+        config.experiment.seed = 3  # type: ignore[misc]
+    modules = build_modules(config)
+    assert isinstance(modules["combo"], Composite) and modules["fog"].visibility_m == 50  # type: ignore[union-attr]
+    assert len(build_sequence(config)) == FRAMES
+
+
+def test_example_configs_validate() -> None:
+    urban = load_config(EXAMPLES / "fog_rain_urban.yaml")
+    assert urban.robustness_boundary is not None and urban.robustness_boundary.parameter == "visibility_m"
+    assert any(p.type == "composite" for p in urban.perturbations)
+    indoor = load_config(EXAMPLES / "indoor_camera.yaml")
+    assert {p.type for p in indoor.perturbations} == {"lens_soiling", "cracked_lens", "composite"}
+
+
+@pytest.mark.parametrize(
+    ("section", "known"),
+    [
+        ("experiment", "name, description, version, seed"),
+        ("dataset", "type, path, sequence, max_frames, start, stereo, options"),
+        ("output", "base_dir, create_timestamp_dir"),
+        ("robustness_boundary", "enabled, name, target_perturbation"),
+    ],
+)
+def test_unknown_key_in_each_section(tmp_path: Path, section: str, known: str) -> None:
+    config = base_config(tmp_path)
+    config[section]["nmae"] = 1
+    message = error_of(tmp_path, config)
+    assert message.startswith(f"{tmp_path / 'exp.yaml'}: {section}.nmae: unknown key; known: {known}")
+
+
+def test_unknown_key_at_top_level_and_in_perturbations(tmp_path: Path) -> None:
+    assert ": slam: unknown key; known: experiment, dataset, perturbations, output, robustness_boundary" in error_of(tmp_path, base_config(tmp_path, slam={}))
+    config = base_config(tmp_path)
+    config["perturbations"][1]["params"] = {}
+    assert "perturbations[1].params: unknown key; known: name, type, enabled, parameters" in error_of(tmp_path, config)
+    config = base_config(tmp_path)
+    config["perturbations"][2]["parameters"]["modules"][0]["paramters"] = {}
+    assert "perturbations[2].parameters.modules[0].paramters: unknown key; known: name, type, parameters" in error_of(tmp_path, config)
+
+
+def test_wrong_types(tmp_path: Path) -> None:
+    config = base_config(tmp_path)
+    config["experiment"]["seed"] = "seven"
+    assert "experiment.seed: 'seven' is not valid; must be an integer >= 0" in error_of(tmp_path, config)
+    config = base_config(tmp_path)
+    config["perturbations"][0]["enabled"] = "yes please"
+    assert "perturbations[0].enabled: 'yes please' is not valid; must be true or false" in error_of(tmp_path, config)
+    config = base_config(tmp_path, perturbations={"name": "fog"})
+    assert "perturbations: " in error_of(tmp_path, config) and "must be a list" in error_of(tmp_path, config)
+    config = base_config(tmp_path)
+    config["dataset"]["max_frames"] = 0
+    assert "dataset.max_frames: 0 is not valid; must be an integer >= 1 or null" in error_of(tmp_path, config)
+
+
+def test_unknown_module_and_parameter(tmp_path: Path) -> None:
+    config = base_config(tmp_path)
+    config["perturbations"][1]["type"] = "fgo"
+    message = error_of(tmp_path, config)
+    assert "exp.yaml: perturbations[1].type: unknown perturbation module 'fgo'; known: none, composite, " in message
+    assert "fog" in message and "rain" in message
+    config = base_config(tmp_path)
+    config["perturbations"][1]["parameters"] = {"visibility": 50}
+    message = error_of(tmp_path, config)
+    assert "perturbations[1].parameters.visibility: fog has no such parameter; parameters: visibility_m," in message
+
+
+def test_out_of_range_value_names_the_path_unit_and_range(tmp_path: Path) -> None:
+    config = base_config(tmp_path)
+    config["perturbations"][1]["parameters"]["visibility_m"] = 0.5
+    assert error_of(tmp_path, config) == (
+        f"{tmp_path / 'exp.yaml'}: perturbations[1].parameters.visibility_m: 0.5 m is not valid; "
+        "visibility_m must be a number in 1 .. 100000 m"
+    )
+    config = base_config(tmp_path)
+    config["perturbations"][2]["parameters"]["modules"][0]["parameters"]["intensity_mm_h"] = 999
+    assert "perturbations[2].parameters.modules[0].parameters.intensity_mm_h: 999 mm/h is not valid; intensity_mm_h must be a number in 0.1 .. 300 mm/h" in error_of(tmp_path, config)
+
+
+def test_missing_dataset_path_and_unknown_kind(tmp_path: Path) -> None:
+    config = base_config(tmp_path, dataset={"type": "kitti", "path": str(tmp_path / "nowhere"), "sequence": "07"})
+    assert f"dataset.path: '{tmp_path / 'nowhere'}' does not exist; give the dataset folder" in error_of(tmp_path, config)
+    config = base_config(tmp_path, dataset={"type": "tum"})
+    assert "dataset.path: is required for dataset kind 'tum'" in error_of(tmp_path, config)
+    config = base_config(tmp_path, dataset={"type": "kitty", "path": "."})
+    assert "dataset.type: unknown dataset kind 'kitty'; known: " in error_of(tmp_path, config)
+    config = base_config(tmp_path)
+    config["dataset"]["options"]["scnee"] = "urban"
+    assert "dataset.options.scnee: unknown option of dataset kind 'synthetic'; known: scene, frames, seed, sensor, cache_dir" in error_of(tmp_path, config)
+
+
+def test_dataset_path_is_env_expanded(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    (tmp_path / "data").mkdir()
+    monkeypatch.setenv("SAL_TEST_ROOT", str(tmp_path))
+    config = base_config(tmp_path, dataset={"type": "folder", "path": "${SAL_TEST_ROOT}/data"})
+    assert load_config(write(tmp_path, config)).dataset.path == tmp_path / "data"
+
+
+def test_duplicate_and_unsafe_perturbation_names(tmp_path: Path) -> None:
+    config = base_config(tmp_path)
+    config["perturbations"][2]["name"] = "rain"
+    assert "perturbations[2].name: 'rain' is already the name of perturbations[0]; names must be unique" in error_of(tmp_path, config)
+    config = base_config(tmp_path)
+    config["perturbations"][0]["name"] = "../escape"
+    assert "perturbations[0].name: '../escape' cannot be a folder name" in error_of(tmp_path, config)
+
+
+def test_robustness_boundary_checks(tmp_path: Path) -> None:
+    def with_rb(**rb: Any) -> str:
+        config = base_config(tmp_path)
+        config["robustness_boundary"].update(rb)
+        return error_of(tmp_path, config)
+
+    assert "robustness_boundary.target_perturbation: 'smog' is not a perturbation of this config; perturbations: rain, fog, combo" in with_rb(target_perturbation="smog")
+    assert "robustness_boundary.parameter: 'heterogeneity' is not a searchable parameter of 'fog' (fog); searchable: visibility_m" in with_rb(parameter="heterogeneity")
+    assert "robustness_boundary.lower_bound: 0.5 m is not valid; visibility_m search values must be a number in 1 .. 100000 m" in with_rb(lower_bound=0.5)
+    assert "robustness_boundary.upper_bound: 10 must be greater than lower_bound 200" in with_rb(lower_bound=200, upper_bound=10)
+    assert "robustness_boundary.tolerance: 0 is not valid" in with_rb(tolerance=0)
+    assert "robustness_boundary.max_iters: 0 is not valid; must be an integer >= 1" in with_rb(max_iters=0)
+    assert "robustness_boundary.ate_rmse_fail: -1 m is not valid" in with_rb(ate_rmse_fail=-1)
+    assert "robustness_boundary.parameter: composite 'combo' has no parameter 'fog.visibility'; searchable: rain.intensity_mm_h, fog.visibility_m" in with_rb(
+        target_perturbation="combo", parameter="fog.visibility"
+    )
+    config = base_config(tmp_path)
+    config["robustness_boundary"].update(target_perturbation="combo", parameter="fog.visibility_m")
+    rb = load_config(write(tmp_path, config)).robustness_boundary
+    assert rb is not None and rb.module == "fog" and rb.name == "combo_fog_visibility_m"
+
+
+def test_yaml_syntax_error_and_duplicate_key_name_the_line(tmp_path: Path) -> None:
+    message = error_of(tmp_path, "experiment:\n  name: exp\ndataset: [unclosed\n")
+    assert message.startswith(f"{tmp_path / 'exp.yaml'}:") and "YAML syntax error" in message
+    message = error_of(tmp_path, "experiment:\n  name: exp\n  name: again\ndataset: {type: synthetic}\n")
+    assert message.startswith(f"{tmp_path / 'exp.yaml'}:3: YAML syntax error: key 'name' appears twice (first on line 2)")
+
+
+def test_cli_error_is_one_line_exit_2_and_creates_nothing(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    config = base_config(tmp_path)
+    config["perturbations"][1]["parameters"]["visibility_m"] = 0.5
+    path = write(tmp_path, config)
+    assert main(["perturb", str(path), "--cache-dir", str(tmp_path / "cache")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("sal: error: ") and "perturbations[1].parameters.visibility_m" in err
+    assert not (tmp_path / "out").exists() and not (tmp_path / "cache").exists()
+
+
+def test_dry_run_prints_the_plan_and_writes_nothing(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = write(tmp_path, base_config(tmp_path))
+    assert main(["perturb", str(path), "--dry-run", "--cache-dir", str(tmp_path / "cache")]) == 0
+    out = capsys.readouterr().out
+    assert f"{FRAMES} frames" in out and "visibility_m=50 m" in out and "intensity_mm_h=40 mm/h" in out
+    assert str(tmp_path / "out" / "exp" / "images" / "combo") in out and "dry run: nothing written" in out
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["exp.yaml"]
+
+
+def test_perturb_writes_the_tree(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    config = base_config(tmp_path)
+    config["perturbations"] = [
+        {"name": "fog", "type": "fog", "parameters": {"visibility_m": 200}},
+        {"name": "fog_heavy", "type": "fog", "parameters": {"visibility_m": 15}},
+        {"name": "drops", "type": "frame_drop", "parameters": {"drop_rate": 0.5, "mode": "periodic", "period": 2}},
+        {"name": "clean", "type": "none"},
+        {"name": "off", "type": "rain", "enabled": False},
+    ]
+    path = write(tmp_path, config)
+    cache = tmp_path / "cache"
+    assert main(["perturb", str(path), "--cache-dir", str(cache)]) == 0
+    out = capsys.readouterr().out
+    assert "ms/frame" in out and "fog_heavy" in out
+    root = tmp_path / "out" / "exp"
+    assert sorted(p.name for p in (root / "images").iterdir()) == ["clean", "drops", "fog", "fog_heavy"]
+    assert (root / "config.yaml").read_text() == path.read_text()
+    results = json.loads((root / "pipeline_results.json").read_text())
+    assert results["status"] == "completed" and results["seed"] == 0
+    for name in ("fog", "fog_heavy", "clean"):
+        folder = root / "images" / name
+        assert len(list((folder / "image_left").glob("*.png"))) == FRAMES
+        assert len(list((folder / "image_right").glob("*.png"))) == FRAMES
+        assert results["perturbations"][name]["frames_kept"] == FRAMES
+        assert results["perturbations"][name]["dropped_frames"] == []
+        assert not (folder / "dropped_frames.txt").exists()
+    # exact-name routing: fog and fog_heavy are separate and hold their own frames
+    fog = open_dataset("synthetic", root / "images" / "fog")
+    heavy = open_dataset("synthetic", root / "images" / "fog_heavy")
+    clean = open_dataset("synthetic", root / "images" / "clean")
+    assert np.abs(heavy[0].image.astype(int) - clean[0].image).mean() > np.abs(fog[0].image.astype(int) - clean[0].image).mean()
+    assert results["perturbations"]["fog"]["module"]["params"]["visibility_m"] == 200
+    assert results["perturbations"]["fog_heavy"]["module"]["params"]["visibility_m"] == 15
+    # frame drop: fewer frames, and the folder, the JSON and dropped_frames.txt agree
+    drops = results["perturbations"]["drops"]
+    kept = sorted(p.stem for p in (root / "images" / "drops" / "image_left").glob("*.png"))
+    assert drops["frames_in"] == FRAMES and 0 < drops["frames_kept"] < FRAMES == drops["frames_kept"] + len(drops["dropped_frames"])
+    assert len(kept) == drops["frames_kept"] == len(open_dataset("synthetic", root / "images" / "drops"))
+    listed = [int(line) for line in (root / "images" / "drops" / "dropped_frames.txt").read_text().splitlines() if not line.startswith("#")]
+    assert listed == drops["dropped_frames"] and not set(listed) & {int(s) for s in kept}
+    # a second run reuses the cache
+    assert main(["perturb", str(path), "--cache-dir", str(cache)]) == 0
+    assert "(cached)" in capsys.readouterr().out
+    assert all(r["cached"] for r in json.loads((root / "pipeline_results.json").read_text())["perturbations"].values())
+
+
+def test_seed_changes_the_output(tmp_path: Path) -> None:
+    images = []
+    for seed in (1, 2):
+        config = base_config(tmp_path / f"s{seed}", experiment={"name": "exp", "seed": seed})
+        config["perturbations"] = [{"name": "rain", "type": "rain", "parameters": {"intensity_mm_h": 60}}]
+        config["dataset"]["max_frames"] = 2
+        del config["robustness_boundary"]
+        (tmp_path / f"s{seed}").mkdir()
+        path = write(tmp_path / f"s{seed}", config)
+        assert main(["perturb", str(path), "--cache-dir", str(tmp_path / "cache")]) == 0
+        seq = open_dataset("synthetic", tmp_path / f"s{seed}" / "out" / "exp" / "images" / "rain")
+        images.append(seq[1].image)
+    assert images[0].shape == images[1].shape and not np.array_equal(images[0], images[1])
+
+
+def test_refuses_to_replace_a_folder_it_did_not_write(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    config = base_config(tmp_path)
+    config["perturbations"] = [{"name": "soil", "type": "lens_soiling"}, {"name": "mine", "type": "lens_soiling"}]
+    del config["robustness_boundary"]
+    config["dataset"]["max_frames"] = 2
+    precious = tmp_path / "out" / "exp" / "images" / "mine" / "notes.txt"
+    precious.parent.mkdir(parents=True)
+    precious.write_text("keep me")
+    assert main(["perturb", str(write(tmp_path, config)), "--cache-dir", str(tmp_path / "cache")]) == 2
+    assert "output.base_dir: " in capsys.readouterr().err and precious.read_text() == "keep me"
+    assert not (tmp_path / "out" / "exp" / "images" / "soil").exists() and not (tmp_path / "cache").exists()
