@@ -18,6 +18,7 @@ from typing import Any
 from pytest_sal.cache_command import add_cache_commands
 from pytest_sal.cli_types import parse_key_values, positive_int
 from pytest_sal.experiment import add_experiment_commands
+from pytest_sal.features_command import add_features_commands
 from pytest_sal.history_command import add_history_commands
 from pytest_sal.module_commands import add_module_commands
 from pytest_sal.vocab_command import add_vocab_commands
@@ -89,6 +90,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_vocab_commands(commands)
     add_history_commands(commands)
     add_experiment_commands(commands)
+    add_features_commands(commands)
     add_cache_commands(commands)
     return parser
 
