@@ -15,8 +15,10 @@ from collections.abc import Sequence as ArgList
 from pathlib import Path
 from typing import Any
 
+from pytest_sal.boundary_command import add_boundary_commands
 from pytest_sal.cache_command import add_cache_commands
 from pytest_sal.cli_types import parse_key_values, positive_int
+from pytest_sal.evaluate_command import add_evaluate_commands
 from pytest_sal.experiment import add_experiment_commands
 from pytest_sal.features_command import add_features_commands
 from pytest_sal.history_command import add_history_commands
@@ -91,6 +93,8 @@ def build_parser() -> argparse.ArgumentParser:
     add_history_commands(commands)
     add_experiment_commands(commands)
     add_features_commands(commands)
+    add_evaluate_commands(commands)
+    add_boundary_commands(commands)
     add_cache_commands(commands)
     return parser
 
