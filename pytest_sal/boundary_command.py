@@ -24,7 +24,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
-from pytest_sal.cli_types import parse_key_values, positive_int
+from pytest_sal.cli_types import add_slam_arguments, parse_key_values
 from sal_adapters import SalError
 
 if TYPE_CHECKING:
@@ -64,13 +64,7 @@ def add_boundary_commands(commands: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     cmd.add_argument("config", type=Path, metavar="CONFIG", help="experiment YAML with an enabled robustness_boundary block")
-    cmd.add_argument("--slam", required=True, metavar="NAME", help="SLAM system (see the sal.systems registry, e.g. reference_vo, orbslam3)")
-    cmd.add_argument(
-        "--slam-option", action="append", default=[], metavar="KEY=VALUE",
-        help="option of the SLAM system, repeatable (values parsed as JSON when they can be)",
-    )
-    cmd.add_argument("--runs", type=positive_int, default=1, metavar="N", help="runs per trial; metrics are their median (default: %(default)s)")
-    cmd.add_argument("--timeout", type=float, default=600.0, metavar="S", help="seconds per SLAM run (default: %(default)s)")
+    add_slam_arguments(cmd, "runs per trial; metrics are their median")
     cmd.add_argument("--cache-dir", type=Path, metavar="DIR", help="trial cache (default: .sal/cache)")
     cmd.add_argument("--no-cache", action="store_true", help="run every trial, read and store nothing in the cache")
     cmd.set_defaults(run=_run)

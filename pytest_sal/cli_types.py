@@ -8,7 +8,7 @@ from typing import Any
 
 from sal_adapters import SalError
 
-__all__ = ["positive_int", "parse_key_values"]
+__all__ = ["add_slam_arguments", "positive_int", "parse_key_values"]
 
 
 def positive_int(text: str) -> int:
@@ -34,3 +34,14 @@ def parse_key_values(pairs: list[str], what: str = "--option") -> dict[str, Any]
         except json.JSONDecodeError:
             options[key] = value
     return options
+
+
+def add_slam_arguments(command: argparse.ArgumentParser, runs_help: str) -> None:
+    """``--slam NAME``, ``--slam-option KEY=VALUE`` (repeatable), ``--runs N``, ``--timeout S``."""
+    command.add_argument("--slam", required=True, metavar="NAME", help="registered SLAM system (entry-point group sal.systems), e.g. reference_vo, orbslam3")
+    command.add_argument(
+        "--slam-option", action="append", default=[], metavar="KEY=VALUE",
+        help="option of the SLAM system, repeatable (values parsed as JSON when they can be)",
+    )
+    command.add_argument("--runs", type=positive_int, default=1, metavar="N", help=runs_help + " (default: %(default)s)")
+    command.add_argument("--timeout", type=float, default=600.0, metavar="S", help="seconds per SLAM run before it is killed (default: %(default)s)")

@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from pytest_sal.cli_types import add_slam_arguments
 from sal_adapters.errors import SalError
 from sal_adapters.textfiles import atomic_write
 from sal_adapters.trajectory import Trajectory
@@ -54,8 +55,6 @@ trajectory_plots/comparison/run_<k>/trajectory_comparison_xz.png.
 
 def add_evaluate_commands(commands: argparse._SubParsersAction) -> None:
     """Add ``evaluate`` to the ``sal`` subcommands."""
-    from pytest_sal.cli_types import positive_int
-
     cmd = commands.add_parser(
         "evaluate",
         help="run a SLAM system on the clean and each perturbed sequence, N runs, and score them",
@@ -66,13 +65,7 @@ def add_evaluate_commands(commands: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     cmd.add_argument("config", type=Path, metavar="CONFIG", help="experiment YAML")
-    cmd.add_argument("--slam", required=True, metavar="NAME", help="registered SLAM system (entry-point group sal.systems), e.g. reference_vo, orbslam3")
-    cmd.add_argument(
-        "--slam-option", action="append", default=[], metavar="KEY=VALUE",
-        help="option of the SLAM system, repeatable (values parsed as JSON when they can be)",
-    )
-    cmd.add_argument("--runs", type=positive_int, default=1, metavar="N", help="runs per sequence (default: %(default)s)")
-    cmd.add_argument("--timeout", type=float, default=600.0, metavar="S", help="seconds per run before it is killed (default: %(default)s)")
+    add_slam_arguments(cmd, "runs per sequence")
     cmd.set_defaults(run=_run)
 
 
