@@ -19,10 +19,10 @@ from pytest_sal.boundary_command import add_boundary_commands
 from pytest_sal.cache_command import add_cache_commands
 from pytest_sal.cli_types import parse_key_values, positive_int
 from pytest_sal.evaluate_command import add_evaluate_commands
-from pytest_sal.experiment import add_experiment_commands
 from pytest_sal.features_command import add_features_commands
 from pytest_sal.history_command import add_history_commands
 from pytest_sal.module_commands import add_module_commands
+from pytest_sal.perturb_command import add_experiment_commands
 from pytest_sal.vocab_command import add_vocab_commands
 from sal_adapters import DATASETS, SalError, open_dataset
 

@@ -1,0 +1,195 @@
+"""``sal perturb CONFIG``: validate an experiment config, then write each enabled perturbation's
+sequence in the dataset's own layout under ``<base_dir>/<name>/images/<perturbation>/``,
+through the trial cache, with progress bars and a timing table."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import time
+from pathlib import Path
+from typing import Any
+
+from pytest_sal.experiment import (
+    BoundaryConfig,
+    ConfigError,
+    ExperimentConfig,
+    build_module,
+    build_modules,
+    build_sequence,
+    load_config,
+)
+from sal_adapters import SalError, Sequence, write_sequence
+from sal_adapters.datasets import WRITTEN_MARKER
+from sal_modules import Composite, Param, Perturbation, perturb
+
+__all__ = ["add_experiment_commands", "run_perturb"]
+
+
+def _describe(module: Perturbation | None) -> str:
+    if module is None:
+        return "clean sequence"
+    steps = module.steps if isinstance(module, Composite) else (module,)
+    parts = []
+    for step in steps:
+        specs = step.parameters()
+        values = ", ".join(f"{k}={_fmt(v)}{' ' + specs[k].unit if specs[k].unit and v is not None else ''}" for k, v in step.params.items())
+        parts.append(f"{step.name}({values})")
+    return " >> ".join(parts)
+
+
+def _fmt(value: Any) -> str:
+    if isinstance(value, float):
+        return f"{value:g}"
+    if value is None:
+        return "null"
+    if isinstance(value, tuple):
+        return "(" + ", ".join(_fmt(v) for v in value) + ")"
+    return repr(value) if isinstance(value, str) else str(value)
+
+
+def _boundary_param(config: ExperimentConfig, rb: BoundaryConfig) -> Param:
+    pert = next(p for p in config.perturbations if p.name == rb.target_perturbation)
+    module = build_module(pert)
+    if isinstance(module, Composite):
+        return module.param(rb.parameter)[1]
+    return type(module).parameters()[rb.parameter]
+
+
+# ------------------------------------------------------------------------------ sal perturb
+
+
+def run_perturb(config: ExperimentConfig, *, dry_run: bool = False, cache_dir: Path | None = None, out: Any = None) -> dict[str, Any]:
+    """Validate everything, then (unless ``dry_run``) write each enabled perturbation under
+    ``<base_dir>/<name>/images/<perturbation>/``; returns the results written to
+    ``pipeline_results.json`` (or the plan)."""
+    import sys
+
+    from pytest_sal.cache import ContentCache, cache_key, default_cache_dir
+
+    out = out or sys.stdout
+    clean = build_sequence(config)
+    modules = build_modules(config)
+    seed = config.experiment.seed
+    perturbed: dict[str, Sequence] = {}
+    for name, module in modules.items():
+        try:
+            perturbed[name] = clean if module is None else perturb(clean, module, seed=seed)
+        except SalError as exc:
+            index = next(i for i, p in enumerate(config.perturbations) if p.name == name)
+            raise ConfigError(config.source, f"perturbations[{index}]", str(exc)) from None
+    root = config.output_dir()
+    print(f"experiment  {config.experiment.name} (seed {seed})", file=out)
+    print(f"dataset     {config.dataset.type} {clean.name}: {len(clean)} frames, {clean.sensor}, {clean.fps:.3g} Hz", file=out)
+    print(f"output      {root}", file=out)
+    width = max([len(n) for n in modules] + [12])
+    for name, module in modules.items():
+        print(f"  {name:{width}s} {_describe(module)}\n  {'':{width}s} -> {root / 'images' / name}", file=out)
+    disabled = [p.name for p in config.perturbations if not p.enabled]
+    if disabled:
+        print(f"  disabled: {', '.join(disabled)}", file=out)
+    rb = config.robustness_boundary
+    if rb is not None:
+        state = "enabled" if rb.enabled else "disabled"
+        spec = _boundary_param(config, rb)
+        unit = f" {spec.search_space().unit}" if spec.search_space().unit else ""
+        print(f"boundary    {rb.name} ({state}): {rb.target_perturbation}.{rb.parameter} in {rb.lower_bound:g} .. {rb.upper_bound:g}{unit}, "
+              f"tolerance {rb.tolerance:g}, max_iters {rb.max_iters}, ate_rmse_fail {rb.ate_rmse_fail:g} m", file=out)
+    if dry_run:
+        print("dry run: nothing written", file=out)
+        return {"dry_run": True, "output_dir": str(root), "perturbations": list(modules)}
+
+    images = root / "images"
+    for name in perturbed:
+        target = images / name
+        if target.exists() and (not target.is_dir() or (any(target.iterdir()) and not (target / WRITTEN_MARKER).is_file())):
+            raise ConfigError(config.source, "output.base_dir", f"{target} exists and was not written by sal perturb; move it or choose another base_dir")
+    cache = ContentCache(cache_dir if cache_dir is not None else default_cache_dir())
+    results: dict[str, Any] = {
+        "experiment": config.experiment.name,
+        "seed": seed,
+        "dataset": {"type": config.dataset.type, "name": clean.name, "frames": len(clean)},
+        "status": "running",
+        "perturbations": {},
+    }
+    all_indices = [int(r.index) for r in clean.records]
+    for name, seq in perturbed.items():
+        module = modules[name]
+        started = time.perf_counter()
+
+        def fill(target: Path, seq: Sequence = seq) -> None:
+            write_sequence(seq, target, progress=True)
+
+        folder, was_cached = cache.compute_dir(cache_key(frames=seq.fingerprint), fill)
+        target = images / name
+        if target.exists():
+            shutil.rmtree(target)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copytree(folder, target)
+        kept = {int(r.index) for r in seq.records}
+        dropped = [i for i in all_indices if i not in kept]
+        if dropped:
+            (target / "dropped_frames.txt").write_text(
+                f"# frames of {clean.name} dropped by {name} (dataset frame indices)\n" + "".join(f"{i}\n" for i in dropped)
+            )
+        results["perturbations"][name] = {
+            "type": next(p.type for p in config.perturbations if p.name == name),
+            "module": None if module is None else module.to_dict(),
+            "frames_in": len(clean),
+            "frames_kept": len(seq),
+            "dropped_frames": dropped,
+            "seconds": round(time.perf_counter() - started, 4),
+            "cached": was_cached,
+            "output": str(target),
+        }
+    results["status"] = "completed"
+    (root / "pipeline_results.json").write_text(json.dumps(results, indent=2) + "\n")
+    (root / "config.yaml").write_text(config.text)
+
+    labels = {
+        name: "none" if module is None else (module.label() if isinstance(module, Composite) else module.name)
+        for name, module in modules.items()
+    }
+    lw = max([len(v) for v in labels.values()] + [6])
+    print(f"\n  {'perturbation':{width}s} {'module':{lw}s} {'kept':>9s} {'ms/frame':>9s} {'total s':>8s}", file=out)
+    for name, r in results["perturbations"].items():
+        label = labels[name]
+        per_frame = 1000 * r["seconds"] / max(1, r["frames_in"])
+        note = " (cached)" if r["cached"] else ""
+        print(f"  {name:{width}s} {label:{lw}s} {r['frames_kept']:>4d}/{r['frames_in']:<4d} {per_frame:9.1f} {r['seconds']:8.2f}{note}", file=out)
+    print(f"wrote {root}", file=out)
+    return results
+
+
+EPILOG = """\
+examples:
+  sal perturb example_suites/configs/fog_rain_urban.yaml --dry-run
+  sal perturb example_suites/configs/indoor_camera.yaml --cache-dir /tmp/sal-cache
+
+Writes <base_dir>/<experiment.name>/images/<perturbation>/ in the dataset's own layout, plus
+pipeline_results.json and a copy of the config. Perturbed sequences are kept in the content
+cache (default .sal/cache), so a second run copies them.
+"""
+
+
+def add_experiment_commands(commands: argparse._SubParsersAction) -> None:
+    """Add ``perturb`` to the ``sal`` subcommands."""
+    cmd = commands.add_parser(
+        "perturb",
+        help="validate an experiment config and write each perturbed sequence",
+        description="Validate the experiment config (every error names the key), then write each\n"
+        "enabled perturbation's sequence under <base_dir>/<name>/images/<perturbation>/.",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    cmd.add_argument("config", type=Path, metavar="CONFIG", help="experiment YAML")
+    cmd.add_argument("--dry-run", action="store_true", help="validate and print the plan; write nothing")
+    cmd.add_argument("--cache-dir", type=Path, metavar="DIR", help="content cache (default: .sal/cache)")
+    cmd.set_defaults(run=_run_perturb)
+
+
+def _run_perturb(args: argparse.Namespace) -> int:
+    config = load_config(args.config)
+    run_perturb(config, dry_run=args.dry_run, cache_dir=args.cache_dir)
+    return 0
