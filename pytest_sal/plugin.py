@@ -211,14 +211,13 @@ def pytest_report_teststatus(report: pytest.TestReport, config: pytest.Config) -
     if outcome.termination == "single":
         trial = outcome.trials[0]
         unit = f" {outcome.boundary.unit}" if outcome.boundary.unit else ""
-        shown = ", ".join(f"{c.split()[0]} {trial.metrics.get(c.split()[0]):.3g}" for c in _criteria_names(outcome) if trial.metrics.get(c.split()[0]) is not None)
+        from pytest_sal.report import criteria_of
+
+        names = dict.fromkeys(name for name, _, _ in criteria_of(outcome))
+        shown = ", ".join(f"{name} {trial.metrics[name]:.3g}" for name in names if trial.metrics.get(name) is not None)
         return "passed", ".", (f"PASSED ({outcome.parameter} = {trial.value:g}{unit}: {shown})", {"green": True})
     return "passed", ".", (f"PASSED ({outcome.parameter} boundary {outcome.boundary.text()})", {"green": True})
 
-
-def _criteria_names(outcome: Any) -> list[str]:
-    """The criteria of the requirement text (``ate_rmse < 1.5 m``), in order."""
-    return outcome.requirement.split(" wherever ")[0].split(" and ")
 
 
 def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: pytest.Config) -> None:

@@ -177,29 +177,31 @@ class SalSession:
         envelope = requirement.envelope
         start = warm_start(previous, parameter=envelope.ref.label, edge=envelope.value, worse=envelope.ref.param.worse)
         outcome = search_outcome(runner, requirement, self.settings, item.nodeid, start)
-        return self._compared(outcome)
+        return self._compared(outcome, previous)
 
     def single(self, item: pytest.Item, ref: Any, value: float, dataset: Any, system: Any, runs: int, workdir: Path) -> Any:
         from pytest_sal.robustness import single_outcome
 
         runner = self._runner(item, ref, dataset, system, runs, workdir)
-        return self._compared(single_outcome(runner, item.function.sal_requirement, item.nodeid, value))  # type: ignore[attr-defined]
+        outcome = single_outcome(runner, item.function.sal_requirement, item.nodeid, value)  # type: ignore[attr-defined]
+        previous = self._previous(item.nodeid, system.name, dataset.name, self.compare) if self.compare else None
+        return self._compared(outcome, previous)
 
     def _previous(self, test_id: str, system: str, dataset: str, ref: str) -> Any:
         if not self.history_dir.is_dir():
             return None
         return self.history.previous((test_id, system, dataset), ref)
 
-    def _compared(self, outcome: Any) -> Any:
-        if self.compare is None:
+    def _compared(self, outcome: Any, previous: Any) -> Any:
+        """``outcome`` with the ``--sal-compare`` result against ``previous`` (the same test's
+        outcome in the history run compared with, already looked up by the caller)."""
+        if self.compare is None or previous is None:
             return outcome
         from pytest_sal.history import regressions
 
-        previous = self._previous(outcome.test_id, outcome.system, outcome.dataset, self.compare)
-        if previous is not None:
-            outcome.previous = previous.boundary
-            found = regressions(self.checks, outcome, previous)
-            outcome.regression = "; ".join(found) if found else None
+        outcome.previous = previous.boundary
+        found = regressions(self.checks, outcome, previous)
+        outcome.regression = "; ".join(found) if found else None
         return outcome
 
     # -- collecting and reporting (controller) -------------------------------------------------
