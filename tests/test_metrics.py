@@ -64,12 +64,13 @@ def evo_cli(tool: str, runs: list[list[str]], workdir: Path) -> list[tuple[dict[
     exe = EVO_BIN / tool
     if not exe.exists():
         pytest.skip(f"{tool} not found beside {sys.executable}")
-    env = {**os.environ, "HOME": str(workdir), "MPLBACKEND": "Agg"}  # evo writes ~/.evo/settings.json
     zips = [workdir / f"{tool}-{i}.zip" for i in range(len(runs))]
-    procs = [
-        subprocess.Popen([str(exe), *args, "--save_results", str(out), "--no_warnings", "--silent"], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        for args, out in zip(runs, zips)
-    ]
+    homes = [workdir / f"home-{i}" for i in range(len(runs))]  # evo creates ~/.evo on first use: one HOME per process, or they race
+    procs = []
+    for args, out, home in zip(runs, zips, homes):
+        home.mkdir()
+        env = {**os.environ, "HOME": str(home), "MPLBACKEND": "Agg"}
+        procs.append(subprocess.Popen([str(exe), *args, "--save_results", str(out), "--no_warnings", "--silent"], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True))
     results = []
     for args, proc, out in zip(runs, procs, zips):
         log, _ = proc.communicate(timeout=120)
