@@ -23,6 +23,7 @@ from pytest_sal.features_command import add_features_commands
 from pytest_sal.history_command import add_history_commands
 from pytest_sal.module_commands import add_module_commands
 from pytest_sal.perturb_command import add_experiment_commands
+from pytest_sal.report_command import add_report_commands
 from pytest_sal.vocab_command import add_vocab_commands
 from sal_adapters import DATASETS, SalError, open_dataset
 
@@ -95,6 +96,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_features_commands(commands)
     add_evaluate_commands(commands)
     add_boundary_commands(commands)
+    add_report_commands(commands)
     add_cache_commands(commands)
     return parser
 

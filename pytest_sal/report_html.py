@@ -46,7 +46,7 @@ from pytest_sal.report import (
 )
 from pytest_sal.requirements import METRICS
 
-__all__ = ["metric_figure", "metric_plot", "write_html_report"]
+__all__ = ["REPORT_CSS", "metric_figure", "metric_plot", "write_html_report"]
 
 PASS_COLOUR = "#2ca02c"
 FAIL_COLOUR = "#d62728"
@@ -226,7 +226,7 @@ def write_html_report(outcomes: Iterable[Outcome], directory: str | Path, *, tit
     where = sorted({" on ".join(x for x in (o.commit, o.machine) if x) for o in outcomes if o.commit or o.machine})
     page = _PAGE.format(
         title=_e(title),
-        css=_CSS,
+        css=REPORT_CSS,
         headline=_e(headline(outcomes)),
         where=f"<p class='where'>{_e(', '.join(where))}</p>" if where else "",
         head=head,
@@ -368,7 +368,7 @@ _PAGE = """<!DOCTYPE html>
 </html>
 """
 
-_CSS = """
+REPORT_CSS = """
 body { font: 14px/1.45 system-ui, -apple-system, "Segoe UI", Roboto, sans-serif; color: #1f2328;
   margin: 0 auto; padding: 1.5em 2em 4em; max-width: 1200px; }
 h1 { margin: 0 0 .2em; font-size: 1.6em; }

@@ -1,0 +1,177 @@
+"""``sal report DIR``: one HTML page from a real experiment folder, looked at in headless Chromium.
+
+The folder is made by the real commands (``sal perturb``, ``sal evaluate`` and ``sal boundary``
+with the reference VO, ``sal features`` with ORB) on 8 frames of the synthetic urban world.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+import subprocess
+from pathlib import Path
+from urllib.parse import unquote
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+
+from pytest_sal.cli import main
+from pytest_sal.experiment import build_sequence, load_config
+from pytest_sal.experiment_report import THUMBNAIL_WIDTH, write_experiment_report
+from sal_adapters import SalError
+from sal_adapters.images import read_image
+
+FRAMES = 8
+CONFIG = {
+    "experiment": {"name": "report_demo", "seed": 3},
+    "dataset": {"type": "synthetic", "max_frames": FRAMES, "options": {"scene": "urban", "frames": FRAMES}},
+    "perturbations": [
+        {"name": "fog", "type": "fog", "parameters": {"visibility_m": 25}},
+        {"name": "rain_soiled", "type": "composite", "parameters": {"modules": [
+            {"type": "rain", "parameters": {"intensity_mm_h": 20}},
+            {"type": "lens_soiling", "parameters": {"particles": 30}},
+        ]}},
+    ],
+    "robustness_boundary": {
+        "enabled": True, "name": "fog_visibility", "target_perturbation": "fog", "parameter": "visibility_m",
+        "lower_bound": 5, "upper_bound": 400, "tolerance": 20, "max_iters": 3, "ate_rmse_fail": 1.0,
+    },
+}
+SEQUENCES = ("baseline", "fog", "rain_soiled")
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+@pytest.fixture(scope="module")
+def experiment(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """An experiment folder written by all four commands."""
+    root = tmp_path_factory.mktemp("experiment")
+    config = root / "report_demo.yaml"
+    config.write_text(yaml.safe_dump({**CONFIG, "output": {"base_dir": str(root / "results")}}))
+    cache = str(root / "cache")
+    for argv in (
+        ["perturb", str(config), "--cache-dir", cache],
+        ["evaluate", str(config), "--slam", "reference_vo"],
+        ["boundary", str(config), "--slam", "reference_vo", "--cache-dir", cache],
+        ["features", str(config), "--features", "orb"],
+    ):
+        assert main(argv) == 0, argv
+    return root / "results" / "report_demo"
+
+
+@pytest.fixture(scope="module")
+def report(experiment: Path) -> Path:
+    return write_experiment_report(experiment, warn=lambda message: pytest.fail(f"unexpected warning: {message}"))
+
+
+def page_images(page: Path) -> list[Path]:
+    return [page.parent / unquote(src) for src in re.findall(r"<img [^>]*src='([^']+)'", page.read_text())]
+
+
+def test_page_shows_every_part_with_the_numbers_of_the_result_files(experiment: Path, report: Path) -> None:
+    text = report.read_text()
+    assert report == experiment / "report" / "index.html"
+    for heading in ("Example frames", "SLAM results", "Robustness boundary", "Feature tracking"):
+        assert f"<h2>{heading}</h2>" in text
+    summary = json.loads((experiment / "slam_results" / "reference_vo" / "metrics" / "summary.json").read_text())
+    table = re.search(r"<table class='slam'>.*?</table>", text, re.S).group(0)
+    for name in SEQUENCES:
+        entry = summary["baseline"] if name == "baseline" else summary["perturbations"][name]
+        row = re.search(rf"<tr[^>]*><td>{name}</td>(.*?)</tr>", table).group(1)
+        median = entry["ate_rmse"]["median"]
+        ok = entry["runs"] - entry["failures"]
+        assert f"<td class='num'>{ok}/{entry['runs']}</td><td class='num'>{'-' if median is None else format(median, '.4f')}</td>" in row
+        for failure in entry["failure_reasons"]:  # a failed run shows its reason
+            assert f"run {failure['run']}: {failure['reason']}" in row
+    assert summary["baseline"]["failures"] == 0 and summary["perturbations"]["fog"]["failures"] == 1  # 25 m fog defeats the VO
+    boundary = json.loads((experiment / "robustness_boundary" / "reference_vo" / "fog_visibility" / "boundary_summary.json").read_text())
+    assert f"fog.visibility_m {boundary['boundary_text']}" in text
+    assert f"a linear sweep at the tolerance step: {boundary['linear_sweep_trials']}" in text
+    assert text.count("<tr class='passed'><td class=num>") + text.count("<tr class='failed'><td class=num>") == len(boundary["trials"])
+    features = json.loads((experiment / "features" / "orb" / "summary.json").read_text())
+    for name in SEQUENCES:
+        assert f"<td>{name}</td><td class=num>{features['sequences'][name]['detections_per_frame']['mean']:.0f}</td>" in text
+    assert "rain(intensity_mm_h=20" in text and "lens_soiling(particles=30" in text  # the composite's steps, in order
+    assert "http://" not in text and "https://" not in text  # self-contained: nothing fetched
+    images = page_images(report)
+    # 3 frames, aggregated + ATE + trajectories, boundary plot, survival + detections
+    assert len(images) == 3 + 3 + 1 + 2
+    assert all(p.is_file() and p.resolve().is_relative_to(report.parent.resolve()) for p in images)
+
+
+def test_example_frames_show_the_same_moment_of_every_sequence(experiment: Path, report: Path) -> None:
+    frames = report.parent / "assets" / "frames"
+    thumbs = {name: read_image(frames / f"{name}.png").astype(np.float64) for name in SEQUENCES}
+    clean = build_sequence(load_config(experiment / "config.yaml"))
+    middle = clean[FRAMES // 2].image
+    expected = cv2.resize(middle, (THUMBNAIL_WIDTH, round(middle.shape[0] * THUMBNAIL_WIDTH / middle.shape[1])), interpolation=cv2.INTER_AREA)
+    assert np.array_equal(thumbs["baseline"], expected)
+    # fog at 25 m visibility washes the street out: far less contrast than the clean frame
+    assert thumbs["fog"].std() < 0.6 * thumbs["baseline"].std()
+    # rain and dirt change the picture, yet it is the same view (not another frame)
+    diff = np.abs(thumbs["rain_soiled"] - thumbs["baseline"]).mean()
+    other = cv2.resize(clean[0].image, expected.shape[1::-1], interpolation=cv2.INTER_AREA).astype(np.float64)
+    assert 1.0 < diff < np.abs(other - thumbs["baseline"]).mean() + 30
+
+
+def test_report_folder_can_be_moved_and_written_elsewhere(experiment: Path, report: Path, tmp_path: Path) -> None:
+    moved = tmp_path / "moved"
+    shutil.copytree(report.parent, moved)
+    assert all(p.is_file() for p in page_images(moved / "index.html"))
+    assert main(["report", str(experiment), "-o", str(tmp_path / "elsewhere")]) == 0
+    assert (tmp_path / "elsewhere" / "index.html").read_text() == report.read_text()
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed (the README's apt line installs it; CI has it)")
+def test_page_renders_in_headless_chromium_with_its_pictures(report: Path, tmp_path: Path) -> None:
+    shot = tmp_path / "page.png"
+    argv = [
+        CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+        "--disable-background-networking", "--disable-component-update", "--disable-sync", "--hide-scrollbars",
+        f"--user-data-dir={tmp_path / 'profile'}", "--force-device-scale-factor=1", "--window-size=1280,6000",
+        f"--screenshot={shot}", report.as_uri(),
+    ]
+    done = subprocess.run(argv, capture_output=True, text=True, timeout=120, env={"HOME": str(tmp_path), "PATH": "/usr/bin:/bin"})
+    assert done.returncode == 0 and shot.is_file(), done.stderr[-2000:]
+    page = cv2.imread(str(shot), cv2.IMREAD_GRAYSCALE)
+    assert page.shape == (6000, 1280)
+    # every example frame and the boundary plot is drawn at its natural size: find each in the screenshot
+    shown = [*sorted((report.parent / "assets" / "frames").glob("*.png")), *(report.parent / "assets" / "boundary").rglob("*.png")]
+    assert len(shown) == 4
+    tops = []
+    for picture in shown:
+        template = cv2.imread(str(picture), cv2.IMREAD_GRAYSCALE)
+        score = cv2.matchTemplate(page, template, cv2.TM_CCOEFF_NORMED)
+        _, best, _, (x, y) = cv2.minMaxLoc(score)
+        assert best > 0.95, f"{picture.name} is not visible on the page (best match {best:.2f})"
+        tops.append(y)
+    assert max(tops[:3]) < tops[3]  # the frames come before the boundary plot
+    # the page ends before the window does: nothing was cut off below
+    assert (page[-300:] > 250).all()
+
+
+def test_broken_and_missing_parts_are_named_and_the_rest_is_built(experiment: Path, tmp_path: Path) -> None:
+    copy = tmp_path / "experiment"
+    shutil.copytree(experiment, copy, ignore=shutil.ignore_patterns("report"))
+    (copy / "slam_results" / "reference_vo" / "metrics" / "summary.json").write_text("{broken")
+    shutil.rmtree(copy / "features")
+    warnings: list[str] = []
+    text = write_experiment_report(copy, warn=warnings.append).read_text()
+    assert warnings == [
+        "warning: slam_results/reference_vo/metrics/summary.json: cannot be read "
+        "(Expecting property name enclosed in double quotes: line 1 column 2 (char 1)); its part of the report is left out"
+    ]
+    assert "<h2>Left out</h2>" in text and "unreadable: slam_results/reference_vo/metrics/summary.json" in text
+    assert "no feature tracking: run <code>sal features CONFIG --features orb</code>" in text
+    assert text.count("<figure>") == 3 and "fog_visibility" in text  # frames and boundary still there
+
+
+def test_a_folder_without_results_is_one_clear_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["report", str(tmp_path / "nowhere")]) == 2
+    assert f"experiment folder not found: {tmp_path / 'nowhere'}" in capsys.readouterr().err
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(SalError, match=r"holds no experiment results \(none of images/, slam_results/, robustness_boundary/, features/\); run sal perturb"):
+        write_experiment_report(tmp_path / "empty")
+    assert not (tmp_path / "empty" / "report").exists()  # nothing written for a refused folder
