@@ -15,6 +15,10 @@ Under ``<output_dir>/slam_results/<algo>/``::
 Unlike the reference implementation, the baseline is run once per run number and reused for
 every perturbation; a failed run (baseline included) is recorded with its reason and never
 aborts the rest. ``SalError`` from a system (bad use: an unsupported sensor) still stops.
+
+Each perturbed sequence is computed once (or taken from the content cache that ``sal perturb``
+and the plugin fill, keyed by the sequence's fingerprint) and read back for every run; the
+SLAM runs themselves are never cached: N runs measure the system's run-to-run spread.
 """
 
 from __future__ import annotations
@@ -44,6 +48,7 @@ EPILOG = """\
 examples:
   sal evaluate example_suites/configs/indoor_camera.yaml --slam reference_vo
   sal evaluate exp.yaml --slam orbslam3 --slam-option features=2000 --runs 3 --timeout 900
+  sal evaluate exp.yaml --slam reference_vo --cache-dir /tmp/sal-cache   # frames sal perturb wrote there
 
 Writes <base_dir>/<name>/slam_results/<SLAM>/: trajectories/run_<k>/{baseline,<perturbation>}.txt,
 metrics/run_<k>/<perturbation>/{ate,vs_baseline}.json, metrics/summary.json (median, mean, std,
@@ -66,6 +71,8 @@ def add_evaluate_commands(commands: argparse._SubParsersAction) -> None:
     )
     cmd.add_argument("config", type=Path, metavar="CONFIG", help="experiment YAML")
     add_slam_arguments(cmd, "runs per sequence")
+    cmd.add_argument("--cache-dir", type=Path, metavar="DIR", help="content cache of perturbed frames (default: .sal/cache)")
+    cmd.add_argument("--no-cache", action="store_true", help="perturb in memory; read and store nothing in the cache")
     cmd.set_defaults(run=_run)
 
 
@@ -75,7 +82,7 @@ def _run(args: argparse.Namespace) -> int:
     if not args.timeout > 0:
         raise SalError(f"--timeout must be positive, got {args.timeout:g}")
     options = parse_key_values(args.slam_option, "--slam-option")
-    run_evaluate(args.config, args.slam, options, runs=args.runs, timeout=args.timeout)
+    run_evaluate(args.config, args.slam, options, runs=args.runs, timeout=args.timeout, cache_dir=args.cache_dir, use_cache=not args.no_cache)
     return 0
 
 
@@ -86,11 +93,15 @@ def run_evaluate(
     *,
     runs: int = 1,
     timeout: float | None = 600.0,
+    cache_dir: Path | None = None,
+    use_cache: bool = True,
     out: Callable[[str], None] = print,
 ) -> dict[str, Any]:
     """Run, score and write everything (see the module docstring); return the summary dict
     (also in ``metrics/summary.json``) with ``root`` (the results folder) added."""
+    from pytest_sal.cache import ContentCache, default_cache_dir
     from pytest_sal.experiment import build_modules, build_sequence, load_config
+    from pytest_sal.trials import cached_sequence
     from sal_modules import perturb
     from sal_wrappers import create
 
@@ -105,6 +116,9 @@ def run_evaluate(
                 continue  # the clean sequence: already the baseline
             raise SalError(f"{config.source}: perturbation name {BASELINE!r} is kept for the clean sequence; rename it")
         sequences[name] = clean if module is None else perturb(clean, module, seed=config.experiment.seed or 0)
+    if use_cache:
+        cache = ContentCache(cache_dir if cache_dir is not None else default_cache_dir())
+        sequences = {name: seq if seq is clean else cached_sequence(seq, cache, progress=True) for name, seq in sequences.items()}
     root = config.output_dir() / "slam_results" / slam
     metrics_dir = root / "metrics"
     if groundtruth is None:

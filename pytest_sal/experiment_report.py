@@ -27,14 +27,13 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import quote
 
-import cv2
 import numpy as np
 
 from pytest_sal.report_html import REPORT_CSS
 from pytest_sal.requirements import METRICS
 from sal_adapters import SalError, Sequence, open_dataset
 from sal_adapters.datasets import WRITTEN_MARKER
-from sal_adapters.images import write_image
+from sal_adapters.images import scaled_to_width, write_image
 from sal_adapters.textfiles import atomic_write_text
 
 __all__ = ["THUMBNAIL_WIDTH", "write_experiment_report"]
@@ -166,7 +165,7 @@ def _frames_section(page: _Page, pipeline: dict[str, Any] | None) -> str:
             continue
         target = page.out_dir / "assets" / "frames" / f"{_file_stem(name)}.png"
         target.parent.mkdir(parents=True, exist_ok=True)
-        thumb = _thumbnail(rgb)
+        thumb = scaled_to_width(rgb, THUMBNAIL_WIDTH)
         write_image(target, thumb)
         module = (recorded.get(name) or {}).get("module")
         caption = "clean sequence" if name == CLEAN and module is None else _module_text(module)
@@ -203,11 +202,6 @@ def _written_sequence(page: _Page, folder: Path) -> Sequence | None:
         return open_dataset(str(info.get("layout")), folder / str(info.get("path", ".")))
     except SalError as exc:
         return page.problem(f"{page.rel(folder)}: cannot be opened as {info.get('layout')!r} ({exc})")
-
-
-def _thumbnail(rgb: np.ndarray) -> np.ndarray:
-    height = max(1, round(rgb.shape[0] * THUMBNAIL_WIDTH / rgb.shape[1]))
-    return cv2.resize(rgb, (THUMBNAIL_WIDTH, height), interpolation=cv2.INTER_AREA)
 
 
 def _module_text(module: dict[str, Any] | None) -> str:

@@ -144,12 +144,13 @@ class TrialRunner:
         return {"value": value, "module": module.to_dict(), "metrics": aggregate_metrics(runs), "runs": runs, "artifacts": artifacts}
 
 
-def cached_sequence(sequence: Sequence, cache: ContentCache) -> Sequence:
+def cached_sequence(sequence: Sequence, cache: ContentCache, *, progress: bool = False) -> Sequence:
     """``sequence`` written once into ``cache`` (keyed by its fingerprint, which for a
-    perturbed sequence covers source, chain, seed and depth provider) and opened from there."""
+    perturbed sequence covers source, chain, seed and depth provider) and opened from there;
+    ``progress`` shows a bar while it is written."""
     from sal_adapters import DATASETS, open_dataset, write_sequence
 
-    folder, _ = cache.compute_dir(cache_key(frames=sequence.fingerprint), lambda target: write_sequence(sequence, target))
+    folder, _ = cache.compute_dir(cache_key(frames=sequence.fingerprint), lambda target: write_sequence(sequence, target, progress=progress))
     options = {"stereo": True} if sequence.sensor == "stereo" and "stereo" in DATASETS.get(sequence.kind).option_names() else {}
     reopened = open_dataset(sequence.kind, folder, **options)
     return reopened.replace(name=sequence.name, meta=dict(reopened.meta, perturbation=sequence.meta.get("perturbation")))
@@ -157,13 +158,8 @@ def cached_sequence(sequence: Sequence, cache: ContentCache) -> Sequence:
 
 def _example_frame(sequence: Sequence, path: Path, width: int = 480) -> Path:
     """The middle frame of ``sequence``, scaled to ``width`` px, as a PNG (for reports)."""
-    import cv2
+    from sal_adapters.images import scaled_to_width, write_image
 
-    from sal_adapters.images import write_image
-
-    image = sequence[len(sequence) // 2].image
-    scale = width / image.shape[1]
-    small = cv2.resize(image, (width, max(1, round(image.shape[0] * scale))), interpolation=cv2.INTER_AREA)
     path.parent.mkdir(parents=True, exist_ok=True)
-    write_image(path, small)
+    write_image(path, scaled_to_width(sequence[len(sequence) // 2].image, width))
     return path

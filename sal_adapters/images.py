@@ -13,7 +13,7 @@ import numpy as np
 
 from sal_adapters.errors import DatasetError
 
-__all__ = ["IMAGE_SUFFIXES", "probe_image", "read_image", "read_depth", "write_image", "write_depth", "is_grey"]
+__all__ = ["IMAGE_SUFFIXES", "is_grey", "probe_image", "read_depth", "read_image", "scaled_to_width", "write_depth", "write_image"]
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".pgm")
 
@@ -126,3 +126,9 @@ def _staged(path: Path) -> Iterator[Path]:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def scaled_to_width(rgb: np.ndarray, width: int) -> np.ndarray:
+    """``rgb`` resized (area averaging) to ``width`` px, keeping its aspect ratio (thumbnails)."""
+    height = max(1, round(rgb.shape[0] * width / rgb.shape[1]))
+    return cv2.resize(rgb, (width, height), interpolation=cv2.INTER_AREA)

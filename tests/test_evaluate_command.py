@@ -168,3 +168,27 @@ def test_a_config_without_perturbations_evaluates_the_baseline_only(tmp_path: Pa
     assert main(["evaluate", str(path), "--slam", "fake"]) == 0
     summary = read(tmp_path / "out" / "exp" / "slam_results" / "fake" / "metrics" / "summary.json")
     assert summary["order"] == ["baseline"] and summary["perturbations"] == {} and summary["baseline"]["runs"] == 1
+
+
+def test_perturbed_frames_come_from_the_cache_sal_perturb_filled(tmp_path: Path, systems: None, monkeypatch: pytest.MonkeyPatch) -> None:
+    from sal_modules.weather.fog import Fog
+
+    path, cache = write_config(tmp_path), tmp_path / "cache"
+    assert main(["perturb", str(path), "--cache-dir", str(cache)]) == 0
+
+    def no_fog(*_: Any, **__: Any) -> None:
+        raise AssertionError("fog computed again")
+
+    monkeypatch.setattr(Fog, "apply", no_fog)
+    tracked = ["--slam-option", "tracked=min(1, v / 20)"]
+    assert main(["evaluate", str(path), "--slam", "fake", *tracked, "--runs", "2", "--cache-dir", str(cache)]) == 0
+    summary = read(tmp_path / "out" / "exp" / "slam_results" / "fake" / "metrics" / "summary.json")
+    assert summary["perturbations"]["fog"]["runs"] == 2 and summary["perturbations"]["fog"]["failures"] == 0
+
+    # an empty cache is filled here, so the (patched) fog is computed
+    with pytest.raises(AssertionError, match="fog computed again"):
+        main(["evaluate", str(path), "--slam", "fake", *tracked, "--cache-dir", str(tmp_path / "empty")])
+    # --no-cache perturbs lazily in memory and stores nothing
+    monkeypatch.undo()
+    assert main(["evaluate", str(path), "--slam", "fake", *tracked, "--no-cache", "--cache-dir", str(tmp_path / "unused")]) == 0
+    assert not (tmp_path / "unused").exists()

@@ -106,7 +106,7 @@ def test_example_frames_show_the_same_moment_of_every_sequence(experiment: Path,
     thumbs = {name: read_image(frames / f"{name}.png").astype(np.float64) for name in SEQUENCES}
     clean = build_sequence(load_config(experiment / "config.yaml"))
     middle = clean[FRAMES // 2].image
-    expected = cv2.resize(middle, (THUMBNAIL_WIDTH, round(middle.shape[0] * THUMBNAIL_WIDTH / middle.shape[1])), interpolation=cv2.INTER_AREA)
+    expected = cv2.resize(middle, (THUMBNAIL_WIDTH, round(middle.shape[0] * THUMBNAIL_WIDTH / middle.shape[1])), interpolation=cv2.INTER_AREA)  # by hand
     assert np.array_equal(thumbs["baseline"], expected)
     # fog at 25 m visibility washes the street out: far less contrast than the clean frame
     assert thumbs["fog"].std() < 0.6 * thumbs["baseline"].std()
