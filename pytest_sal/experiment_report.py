@@ -90,13 +90,18 @@ class _Page:
 
 def write_experiment_report(folder: str | Path, out_dir: str | Path | None = None, *, warn: Callable[[str], None] = print) -> Path:
     """Write ``index.html`` and ``assets/`` for the experiment ``folder`` into ``out_dir``
-    (default ``folder/report``); return the page's path.
+    (default ``folder/report``); return the page's path. ``folder`` may also be the experiment's
+    YAML config: its results folder ``<output.base_dir>/<experiment.name>`` is used.
 
     Raises:
-        SalError: ``folder`` is not a folder, or holds none of images/, slam_results/,
-            robustness_boundary/, features/ (nothing was run into it yet).
+        SalError: ``folder`` is not a folder (or a config), holds none of images/, slam_results/,
+            robustness_boundary/, features/ (nothing was run into it yet), or ``out_dir`` is a file.
     """
     folder = Path(folder).expanduser()
+    if folder.is_file() and folder.suffix.lower() in (".yaml", ".yml"):
+        from pytest_sal.experiment import load_config
+
+        folder = load_config(folder).output_dir()
     if not folder.is_dir():
         raise SalError(f"experiment folder not found: {folder} (give <output.base_dir>/<experiment.name>)")
     parts = ("images", "slam_results", "robustness_boundary", "features")
@@ -106,6 +111,8 @@ def write_experiment_report(folder: str | Path, out_dir: str | Path | None = Non
             "run sal perturb, sal evaluate, sal boundary or sal features on its config first"
         )
     out_dir = Path(out_dir).expanduser() if out_dir is not None else folder / "report"
+    if out_dir.exists() and not out_dir.is_dir():
+        raise SalError(f"report folder {out_dir} is a file; give a folder for index.html and assets/")
     assets = out_dir / "assets"
     if assets.exists():
         shutil.rmtree(assets)  # pictures of an earlier report of a different run

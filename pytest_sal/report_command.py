@@ -11,6 +11,7 @@ EPILOG = """\
 examples:
   sal report results/fog_rain_urban
   sal report results/fog_rain_urban -o /tmp/fog-report
+  sal report example_suites/configs/fog_rain_urban.yaml     # the config's results folder
 
 DIR is <output.base_dir>/<experiment.name>, where sal perturb, evaluate, boundary and features
 wrote their results. The page shows example frames of every perturbation at the same moment,
@@ -31,7 +32,7 @@ def add_report_commands(commands: argparse._SubParsersAction) -> None:
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    cmd.add_argument("folder", type=Path, metavar="DIR", help="experiment folder: <output.base_dir>/<experiment.name>")
+    cmd.add_argument("folder", type=Path, metavar="DIR", help="experiment folder <output.base_dir>/<experiment.name>, or the experiment's YAML config")
     cmd.add_argument("-o", "--out", type=Path, metavar="OUT", help="folder for index.html and assets/ (default: DIR/report)")
     cmd.set_defaults(run=_run)
 

@@ -53,7 +53,7 @@ def experiment(tmp_path_factory: pytest.TempPathFactory) -> Path:
     cache = str(root / "cache")
     for argv in (
         ["perturb", str(config), "--cache-dir", cache],
-        ["evaluate", str(config), "--slam", "reference_vo"],
+        ["evaluate", str(config), "--slam", "reference_vo", "--cache-dir", cache],
         ["boundary", str(config), "--slam", "reference_vo", "--cache-dir", cache],
         ["features", str(config), "--features", "orb"],
     ):
@@ -122,6 +122,9 @@ def test_report_folder_can_be_moved_and_written_elsewhere(experiment: Path, repo
     assert all(p.is_file() for p in page_images(moved / "index.html"))
     assert main(["report", str(experiment), "-o", str(tmp_path / "elsewhere")]) == 0
     assert (tmp_path / "elsewhere" / "index.html").read_text() == report.read_text()
+    # the config names its results folder: sal report CONFIG is the same page
+    assert main(["report", str(experiment.parent.parent / "report_demo.yaml"), "-o", str(tmp_path / "from-config")]) == 0
+    assert (tmp_path / "from-config" / "index.html").read_text() == report.read_text()
 
 
 @pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed (the README's apt line installs it; CI has it)")
@@ -175,3 +178,7 @@ def test_a_folder_without_results_is_one_clear_error(tmp_path: Path, capsys: pyt
     with pytest.raises(SalError, match=r"holds no experiment results \(none of images/, slam_results/, robustness_boundary/, features/\); run sal perturb"):
         write_experiment_report(tmp_path / "empty")
     assert not (tmp_path / "empty" / "report").exists()  # nothing written for a refused folder
+    (tmp_path / "empty" / "images").mkdir()
+    (tmp_path / "file").write_text("")
+    with pytest.raises(SalError, match=r"report folder .*file is a file; give a folder for index.html and assets/"):
+        write_experiment_report(tmp_path / "empty", tmp_path / "file")
