@@ -23,15 +23,18 @@ def shared_data() -> Path:
 
 @pytest.fixture(scope="session", autouse=True)
 def isolated_sal_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """Every test session renders and caches into its own folder, never the user's cache."""
+    """Every test session renders and caches into its own folders, never the user's cache nor
+    the checkout: ``sal`` commands run without ``--cache-dir`` use ``./.sal/cache``, which is
+    redirected here (the plugin's ``<rootdir>/.sal/cache`` is left as it is)."""
+    import pytest_sal.cache
+
     root = tmp_path_factory.mktemp("sal-cache")
-    previous = os.environ.get("SAL_CACHE_DIR")
-    os.environ["SAL_CACHE_DIR"] = str(root)
-    yield root
-    if previous is None:
-        os.environ.pop("SAL_CACHE_DIR", None)
-    else:
-        os.environ["SAL_CACHE_DIR"] = previous
+    commands_cache = tmp_path_factory.mktemp("commands-trial-cache")
+    default = pytest_sal.cache.default_cache_dir
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("SAL_CACHE_DIR", str(root))
+        patch.setattr(pytest_sal.cache, "default_cache_dir", lambda rootdir=None: commands_cache if rootdir is None else default(rootdir))
+        yield root
 
 
 @pytest.fixture(scope="session")
