@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from pytest_sal.cli_types import add_slam_arguments
+from pytest_sal.experiment import BASELINE
 from sal_adapters.errors import SalError
 from sal_adapters.textfiles import atomic_write
 from sal_adapters.trajectory import Trajectory
@@ -42,7 +43,6 @@ __all__ = ["SUMMARY_METRICS", "add_evaluate_commands", "run_evaluate"]
 
 #: metrics summarised over runs in summary.json
 SUMMARY_METRICS = ("ate_rmse", "rpe_trans", "rpe_rot", "tracking_rate")
-BASELINE = "baseline"
 
 EPILOG = """\
 examples:
@@ -100,22 +100,15 @@ def run_evaluate(
     """Run, score and write everything (see the module docstring); return the summary dict
     (also in ``metrics/summary.json``) with ``root`` (the results folder) added."""
     from pytest_sal.cache import ContentCache, default_cache_dir
-    from pytest_sal.experiment import build_modules, build_sequence, load_config
+    from pytest_sal.experiment import build_sequence, load_config, perturbed_sequences
     from pytest_sal.trials import cached_sequence
-    from sal_modules import perturb
     from sal_wrappers import create
 
     config = load_config(config_path)
     system = create(slam, **(options or {}))  # unknown name: SalError listing the known systems
     clean = build_sequence(config)
     groundtruth = clean.groundtruth
-    sequences = {BASELINE: clean}
-    for name, module in build_modules(config).items():
-        if name == BASELINE:
-            if module is None:
-                continue  # the clean sequence: already the baseline
-            raise SalError(f"{config.source}: perturbation name {BASELINE!r} is kept for the clean sequence; rename it")
-        sequences[name] = clean if module is None else perturb(clean, module, seed=config.experiment.seed or 0)
+    sequences = perturbed_sequences(config, clean)
     if use_cache:
         cache = ContentCache(cache_dir if cache_dir is not None else default_cache_dir())
         sequences = {name: seq if seq is clean else cached_sequence(seq, cache, progress=True) for name, seq in sequences.items()}
@@ -198,7 +191,7 @@ def _ate_record(metrics: Any, result: Any, k: int, seconds: float) -> dict[str, 
     record["ate_stats"] = None if a is None else {k2: getattr(a, k2) for k2 in ("rmse", "mean", "median", "std", "min", "max")}
     record["wall_time_s"] = float(result.wall_time_s)
     record["seconds"] = seconds
-    record["log_tail"] = result.log_tail if result.failure is not None else ""
+    record["log_tail"] = result.log_tail if result.failure is not None or metrics.failure is not None else ""  # a run or a score that failed
     return record
 
 

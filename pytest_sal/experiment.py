@@ -34,6 +34,7 @@ from sal_modules import (
 )
 
 __all__ = [
+    "BASELINE",
     "BoundaryConfig",
     "ConfigError",
     "DatasetConfig",
@@ -42,11 +43,16 @@ __all__ = [
     "OutputConfig",
     "PerturbationConfig",
     "StepConfig",
+    "build_module",
     "build_modules",
     "build_sequence",
     "load_config",
     "parse_config",
+    "perturbed_sequences",
 ]
+
+#: name of the clean sequence in every output tree (a perturbation of another type may not take it)
+BASELINE = "baseline"
 
 SAFE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 SAFE_NAME_TEXT = "letters, digits, '_', '-', '.' (not first)"
@@ -336,6 +342,8 @@ class _Parser:
                 raise self.error(f"{where}.name", f"{name!r} is already the name of perturbations[{seen[name]}]; names must be unique (they are folder names)")
             seen[name] = i
             kind = self.typed(d["type"], f"{where}.type", "str")
+            if name == BASELINE and kind != "none":
+                raise self.error(f"{where}.name", f"{BASELINE!r} is kept for the clean sequence (type none); rename this {kind} perturbation")
             enabled = self.typed(d.get("enabled", True), f"{where}.enabled", "bool")
             params = self.typed(d.get("parameters") or {}, f"{where}.parameters", "dict")
             if kind == "none":
@@ -493,3 +501,26 @@ def build_module(pert: PerturbationConfig) -> Perturbation | None:
 def build_modules(config: ExperimentConfig) -> dict[str, Perturbation | None]:
     """The module of each enabled perturbation by name (``None``: the clean sequence)."""
     return {p.name: build_module(p) for p in config.enabled()}
+
+
+def perturbed_sequences(config: ExperimentConfig, clean: Sequence) -> dict[str, Sequence]:
+    """``baseline`` (the clean sequence) first, then each enabled perturbation by name: lazily
+    perturbed with the experiment's seed and named ``<clean name>+<perturbation name>``, so
+    two perturbations of one module (fog, fog_heavy) stay apart in every record (type none:
+    the clean sequence under that name). A module that cannot apply to this sequence (no depth
+    for fog) is a ``ConfigError`` naming the perturbation."""
+    from sal_modules import perturb
+
+    sequences = {BASELINE: clean}
+    for index, pert in enumerate(config.perturbations):
+        if not pert.enabled:
+            continue
+        module = build_module(pert)
+        if module is None:
+            sequences[pert.name] = clean
+            continue
+        try:
+            sequences[pert.name] = perturb(clean, module, seed=config.experiment.seed).replace(name=f"{clean.name}+{pert.name}")
+        except SalError as exc:
+            raise ConfigError(config.source, f"perturbations[{index}]", str(exc)) from None
+    return sequences

@@ -68,9 +68,9 @@ class _Page:
         return data
 
     def problem(self, message: str) -> None:
+        """Note ``message`` on the page and warn; returns ``None`` for ``return page.problem(...)``."""
         self.problems.append(message)
         self.warn(f"warning: {message}")
-        return None
 
     def picture(self, source: Path, name: str, alt: str, css: str = "plot") -> str:
         """Copy the PNG ``source`` to ``assets/<name>`` and return its <img>, or a note when absent."""

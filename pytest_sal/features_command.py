@@ -39,16 +39,12 @@ def add_features_commands(commands: argparse._SubParsersAction) -> None:
 def run_features(config_path: Path, features: str, *, model: Path | None = None, max_keypoints: int = 1000, max_frames: int | None = None) -> dict:
     """Validate the config, build the extractors (a missing model is an error before any work),
     then track every feature type through the clean and every perturbed sequence."""
-    from pytest_sal.experiment import build_modules, build_sequence, load_config
+    from pytest_sal.experiment import build_sequence, load_config, perturbed_sequences
     from pytest_sal.features import compare_features, parse_features
-    from sal_modules import perturb
 
     config = load_config(config_path)
     extractors = parse_features(features, model=model, max_keypoints=max_keypoints)
-    clean = build_sequence(config)
-    sequences = {"baseline": clean}
-    for name, module in build_modules(config).items():
-        sequences[name] = clean if module is None else perturb(clean, module, seed=config.experiment.seed)
+    sequences = perturbed_sequences(config, build_sequence(config))
     out_dir = config.output_dir() / "features"
     results = compare_features(sequences, extractors, out_dir, max_frames=max_frames)
     for feature, result in results.items():

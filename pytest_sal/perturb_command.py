@@ -19,10 +19,11 @@ from pytest_sal.experiment import (
     build_modules,
     build_sequence,
     load_config,
+    perturbed_sequences,
 )
-from sal_adapters import SalError, Sequence, write_sequence
+from sal_adapters import Sequence, write_sequence
 from sal_adapters.datasets import WRITTEN_MARKER
-from sal_modules import Composite, Param, Perturbation, perturb
+from sal_modules import Composite, Param, Perturbation
 
 __all__ = ["add_experiment_commands", "run_perturb"]
 
@@ -72,13 +73,7 @@ def run_perturb(config: ExperimentConfig, *, dry_run: bool = False, cache_dir: P
     clean = build_sequence(config)
     modules = build_modules(config)
     seed = config.experiment.seed
-    perturbed: dict[str, Sequence] = {}
-    for name, module in modules.items():
-        try:
-            perturbed[name] = clean if module is None else perturb(clean, module, seed=seed)
-        except SalError as exc:
-            index = next(i for i, p in enumerate(config.perturbations) if p.name == name)
-            raise ConfigError(config.source, f"perturbations[{index}]", str(exc)) from None
+    perturbed = {name: seq for name, seq in perturbed_sequences(config, clean).items() if name in modules}  # the baseline only if listed
     root = config.output_dir()
     print(f"experiment  {config.experiment.name} (seed {seed})", file=out)
     print(f"dataset     {config.dataset.type} {clean.name}: {len(clean)} frames, {clean.sensor}, {clean.fps:.3g} Hz", file=out)

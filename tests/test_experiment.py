@@ -172,6 +172,12 @@ def test_duplicate_and_unsafe_perturbation_names(tmp_path: Path) -> None:
     config = base_config(tmp_path)
     config["perturbations"][0]["name"] = "../escape"
     assert "perturbations[0].name: '../escape' cannot be a folder name" in error_of(tmp_path, config)
+    config = base_config(tmp_path)
+    config["perturbations"][1]["name"] = "baseline"  # a fog: the clean sequence's name is taken
+    assert "perturbations[1].name: 'baseline' is kept for the clean sequence (type none); rename this" in error_of(tmp_path, config)
+    config["perturbations"].append({"name": "baseline", "type": "none"})  # the clean sequence itself may be listed
+    config["perturbations"][1]["name"] = "fog"
+    assert load_config(write(tmp_path, config)).perturbations[3].type == "none"
 
 
 def test_robustness_boundary_checks(tmp_path: Path) -> None:
