@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import shutil
 from pathlib import Path
 
 import pytest
@@ -46,3 +47,26 @@ def orb_vocabulary(tmp_path_factory: pytest.TempPathFactory) -> Path:
     base = tmp_path_factory.getbasetemp()
     folder = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "orb-vocabulary"
     return ensure_vocabulary(cache_dir=folder)
+
+
+@pytest.fixture
+def ch7_folder(shared_data: Path, tmp_path: Path) -> Path:
+    """The two real colour + depth pairs as a freiburg2 sequence, with a little ground truth."""
+    src = shared_data / "tum_rgbd_samples" / "slambook2_tum_like"
+    folder = tmp_path / "rgbd_dataset_freiburg2_desk"
+    (folder / "rgb").mkdir(parents=True)
+    (folder / "depth").mkdir()
+    stamps = ["1311868164.363181", "1311868164.399454"]
+    dstamps = ["1311868164.373557", "1311868164.407867"]
+    for k, (t, td) in enumerate(zip(stamps, dstamps), start=1):
+        shutil.copy(src / f"ch7_{k}.png", folder / "rgb" / f"{t}.png")
+        shutil.copy(src / f"ch7_{k}_depth.png", folder / "depth" / f"{td}.png")
+    (folder / "rgb.txt").write_text("# color images\n" + "".join(f"{t} rgb/{t}.png\n" for t in stamps))
+    (folder / "depth.txt").write_text("# depth maps\n" + "".join(f"{t} depth/{t}.png\n" for t in dstamps))
+    (folder / "groundtruth.txt").write_text(
+        "# timestamp tx ty tz qx qy qz qw\n"
+        "1311868164.3500 -0.1166 -1.3880 1.3881 0.6566 0.6010 -0.2994 -0.3413\n"
+        "1311868164.3800 -0.1164 -1.3879 1.3880 0.6567 0.6008 -0.2993 -0.3415\n"
+        "1311868164.4100 -0.1160 -1.3877 1.3878 0.6568 0.6007 -0.2991 -0.3417\n"
+    )
+    return folder
