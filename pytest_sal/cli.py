@@ -39,6 +39,14 @@ examples:
   sal modules                                perturbation modules, parameters, units, ranges
   sal preview fog visibility_m=30 --dataset synthetic --frame 5 -o fog.png
 
+the paper's workflow, one YAML experiment (example_suites/configs/ has the table of severities):
+  sal perturb  example_suites/configs/urban_rain.yaml --dry-run   validate, print the plan
+  sal perturb  example_suites/configs/urban_rain.yaml             perturbed sequences on disk
+  sal evaluate example_suites/configs/urban_rain.yaml --slam orbslam3 --runs 3
+  sal boundary example_suites/configs/urban_rain.yaml --slam reference_vo
+  sal features example_suites/configs/urban_rain.yaml --features orb
+  sal report   example_suites/configs/urban_rain.yaml             one HTML page of all of it
+
 Datasets are read in their own layouts (KITTI odometry, TUM RGB-D, EuRoC MAV, a folder of
 images) or rendered (the synthetic world: urban street canyon or indoor room). Rendered frames
 are cached in $SAL_CACHE_DIR (default ~/.cache/sal).
