@@ -9,7 +9,6 @@ from __future__ import annotations
 import json
 import re
 import shutil
-import subprocess
 from pathlib import Path
 from urllib.parse import unquote
 
@@ -17,6 +16,7 @@ import cv2
 import numpy as np
 import pytest
 import yaml
+from browser import find_picture, needs_chromium, screenshot
 
 from pytest_sal.cli import main
 from pytest_sal.experiment import build_sequence, load_config
@@ -41,7 +41,6 @@ CONFIG = {
     },
 }
 SEQUENCES = ("baseline", "fog", "rain_soiled")
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 
 
 @pytest.fixture(scope="module")
@@ -76,7 +75,7 @@ def test_page_shows_every_part_with_the_numbers_of_the_result_files(experiment: 
     for heading in ("Example frames", "SLAM results", "Robustness boundary", "Feature tracking"):
         assert f"<h2>{heading}</h2>" in text
     summary = json.loads((experiment / "slam_results" / "reference_vo" / "metrics" / "summary.json").read_text())
-    table = re.search(r"<table class='slam'>.*?</table>", text, re.S).group(0)
+    table = re.search(r"<table class='slam'>.*?</table>", text, re.DOTALL).group(0)
     for name in SEQUENCES:
         entry = summary["baseline"] if name == "baseline" else summary["perturbations"][name]
         row = re.search(rf"<tr[^>]*><td>{name}</td>(.*?)</tr>", table).group(1)
@@ -127,29 +126,17 @@ def test_report_folder_can_be_moved_and_written_elsewhere(experiment: Path, repo
     assert (tmp_path / "from-config" / "index.html").read_text() == report.read_text()
 
 
-@pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed (the README's apt line installs it; CI has it)")
+@needs_chromium
 def test_page_renders_in_headless_chromium_with_its_pictures(report: Path, tmp_path: Path) -> None:
-    shot = tmp_path / "page.png"
-    argv = [
-        CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-        "--disable-background-networking", "--disable-component-update", "--disable-sync", "--hide-scrollbars",
-        f"--user-data-dir={tmp_path / 'profile'}", "--force-device-scale-factor=1", "--window-size=1280,6000",
-        f"--screenshot={shot}", report.as_uri(),
-    ]
-    done = subprocess.run(argv, capture_output=True, text=True, timeout=120, env={"HOME": str(tmp_path), "PATH": "/usr/bin:/bin"})
-    assert done.returncode == 0 and shot.is_file(), done.stderr[-2000:]
-    page = cv2.imread(str(shot), cv2.IMREAD_GRAYSCALE)
-    assert page.shape == (6000, 1280)
+    page = screenshot(report, tmp_path)
     # every example frame and the boundary plot is drawn at its natural size: find each in the screenshot
     shown = [*sorted((report.parent / "assets" / "frames").glob("*.png")), *(report.parent / "assets" / "boundary").rglob("*.png")]
     assert len(shown) == 4
     tops = []
     for picture in shown:
-        template = cv2.imread(str(picture), cv2.IMREAD_GRAYSCALE)
-        score = cv2.matchTemplate(page, template, cv2.TM_CCOEFF_NORMED)
-        _, best, _, (x, y) = cv2.minMaxLoc(score)
+        best, top = find_picture(page, picture)
         assert best > 0.95, f"{picture.name} is not visible on the page (best match {best:.2f})"
-        tops.append(y)
+        tops.append(top)
     assert max(tops[:3]) < tops[3]  # the frames come before the boundary plot
     # the page ends before the window does: nothing was cut off below
     assert (page[-300:] > 250).all()
@@ -162,10 +149,11 @@ def test_broken_and_missing_parts_are_named_and_the_rest_is_built(experiment: Pa
     shutil.rmtree(copy / "features")
     warnings: list[str] = []
     text = write_experiment_report(copy, warn=warnings.append).read_text()
-    assert warnings == [
+    expected = (
         "warning: slam_results/reference_vo/metrics/summary.json: cannot be read "
         "(Expecting property name enclosed in double quotes: line 1 column 2 (char 1)); its part of the report is left out"
-    ]
+    )
+    assert warnings == [expected]
     assert "<h2>Left out</h2>" in text and "unreadable: slam_results/reference_vo/metrics/summary.json" in text
     assert "no feature tracking: run <code>sal features CONFIG --features orb</code>" in text
     assert text.count("<figure>") == 3 and "fog_visibility" in text  # frames and boundary still there

@@ -8,6 +8,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from browser import find_picture, needs_chromium, screenshot
 
 from pytest_sal.outcome import Boundary, Outcome, Trial
 from pytest_sal.report import (
@@ -289,3 +290,18 @@ def test_a_sweep_point_without_envelope_trials_or_metrics_still_reports(tmp_path
     assert image is not None and image.shape == (600, 800, 3)
     point.trials, point.boundary = [Trial(3.0, False, m(0.9, 1.0), failed=["ate_rmse < 0.5 m"])], Boundary(None, 3.0, "px")
     assert summary_rows([point])[0]["boundary"] == "failed at 3 px"
+
+
+@needs_chromium
+def test_html_report_renders_in_headless_chromium(outcomes: list[Outcome], tmp_path: Path) -> None:
+    index = write_html_report(outcomes, tmp_path / "report")
+    screen = screenshot(index, tmp_path, size=(1280, 9000))
+    plots = re.findall(r"<img class='plot' src='([^']+)'", index.read_text(encoding="utf-8"))
+    assert len(plots) == len(outcomes)
+    tops = []
+    for src in plots:  # each metric plot is drawn at its natural 800 x 600 px, in the page's order
+        best, top = find_picture(screen, index.parent / src)
+        assert best > 0.95, f"{src} is not visible on the page (best match {best:.2f})"
+        tops.append(top)
+    assert tops == sorted(tops) and tops[0] > 200  # below the summary table
+    assert (screen[-200:] > 250).all()  # the whole page fitted in the window
