@@ -38,31 +38,40 @@ file holds keyframes only) every frame from the first to the last pose counts as
 from __future__ import annotations
 
 import dataclasses
-import glob
 import hashlib
-import json
 import os
 import re
 import shlex
-import signal
-import subprocess
 import time
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from sal_adapters import Sequence, Trajectory, write_sequence
 from sal_adapters.datasets import DATASETS
 from sal_adapters.errors import DatasetError
-from sal_adapters.textfiles import atomic_write_text, format_float, read_numeric_table, read_rows
-from sal_adapters.trajectory import read_times, seconds_to_ns
+from sal_adapters.textfiles import (
+    atomic_write_text,
+    format_float,
+)
+from sal_adapters.trajectory import seconds_to_ns
 from sal_wrappers.base import RunResult, SlamSystem, SlamSystemError, TrackState
 from sal_wrappers.child import describe_exit, log_tail
+from sal_wrappers.command_output import (
+    OUTPUT_FORMATS,
+    TIME_UNITS,
+    find_output,
+    frame_states,
+    no_match_message,
+    read_output,
+    snapshot,
+    written_since,
+)
+from sal_wrappers.process_group import run_process_group
 
-__all__ = ["CommandSystem", "PLACEHOLDERS", "OUTPUT_FORMATS", "TIME_UNITS"]
+__all__ = ["PLACEHOLDERS", "CommandSystem"]
 
 #: Every placeholder and what it becomes (paths are absolute).
 PLACEHOLDERS: dict[str, str] = {
@@ -92,8 +101,6 @@ PLACEHOLDERS: dict[str, str] = {
     "camera_bf": "camera_fx * camera_baseline (ORB-SLAM's Camera.bf)",
 }
 
-OUTPUT_FORMATS = ("tum", "kitti", "euroc", "json")
-TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 #: What each built-in layout can hold (a plug-in layout is not checked).
 LAYOUT_SENSORS = {
     "kitti": ("mono", "stereo"),
@@ -102,8 +109,6 @@ LAYOUT_SENSORS = {
     "folder": ("mono",),
     "synthetic": ("mono", "stereo", "rgbd"),
 }
-#: Seconds between SIGTERM and SIGKILL when a run times out.
-KILL_GRACE_S = 3.0
 STAGE_DIR = "sequence"
 LOG_NAME = "run.log"
 
@@ -342,11 +347,11 @@ class CommandSystem(SlamSystem):
 
         times_path = workdir / "output_times.txt"
         times_path.unlink(missing_ok=True)
-        before = _snapshot(output, self.output_is_pattern, workdir)
+        before = snapshot(output, self.output_is_pattern, workdir)
         stage_time = time.monotonic() - stage_start
 
         log_path = workdir / LOG_NAME
-        status, timed_out, wall, start_error = _run_process(command, cwd, env, log_path, timeout)
+        status, timed_out, wall, start_error = run_process_group(command, cwd, env, log_path, timeout)
 
         info: dict[str, Any] = {
             "argv": command,
@@ -364,11 +369,11 @@ class CommandSystem(SlamSystem):
         trajectory: Trajectory | None = None
         output_error: str | None = None
         if start_error is None:
-            found, output_error = _find_output(output, self.output_is_pattern, before)
+            found, output_error = find_output(output, self.output_is_pattern, before)
             if found is not None:
                 info["output"] = str(found)
                 try:
-                    trajectory = self._read(found, stamps, times_path if _written_since(times_path, before) else None)
+                    trajectory = read_output(found, self.output_format, self.time_unit, stamps, times_path if written_since(times_path, before) else None)
                 except DatasetError as exc:
                     output_error = f"unparsable output: {exc}"
                 except ValueError as exc:
@@ -378,9 +383,9 @@ class CommandSystem(SlamSystem):
         scored: Trajectory | None = None
         if trajectory is not None:
             info["poses"] = len(trajectory)
-            states, scored = _states(stamps, sequence.fps, trajectory, self.keyframes)
+            states, scored = frame_states(stamps, sequence.fps, trajectory, self.keyframes)
             if scored is None and output_error is None:
-                output_error = _no_match_message(found, stamps, sequence.fps, trajectory, self.time_unit)
+                output_error = no_match_message(found, stamps, sequence.fps, trajectory, self.time_unit)
 
         if start_error is not None:
             failure: str | None = start_error
@@ -444,37 +449,6 @@ class CommandSystem(SlamSystem):
             values["settings"] = str(workdir / "settings" / self.settings.name)
         return values
 
-    # -- reading the output ---------------------------------------------------------------------
-    def _read(self, path: Path, frame_times: np.ndarray, times_path: Path | None) -> Trajectory:
-        """The trajectory in ``path`` (times in s); an empty trajectory when it holds no pose.
-        Raises ``DatasetError`` (file and line) or ``ValueError`` when it cannot be parsed."""
-        scale = TIME_UNITS[self.time_unit]
-        empty = Trajectory(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 4)))
-        if self.output_format == "json":
-            return _read_json(path, scale)
-        if not read_rows(path, delimiter="," if self.output_format == "euroc" else None):
-            return empty
-        if self.output_format == "tum":
-            return _rescaled(Trajectory.read_tum(path), scale)
-        if self.output_format == "euroc":
-            return Trajectory.read_euroc(path)
-        table, _ = read_numeric_table(path, (12, 13), what="values (3x4 pose row-major, optionally preceded by a timestamp)")
-        if table.shape[1] == 13:
-            return _rescaled(Trajectory.read_kitti(path), scale)
-        if times_path is not None:
-            stamps = read_times(times_path) * scale
-            if len(stamps) != len(table):
-                raise DatasetError(f"{len(table)} poses in {path.name} but {len(stamps)} times", times_path)
-        elif len(table) == len(frame_times):
-            stamps = frame_times
-        else:
-            raise DatasetError(
-                f"{len(table)} poses of 12 values (no timestamps) for {len(frame_times)} frames: without times a KITTI "
-                f"file must hold one pose per frame given, in order; write 13 values per line (timestamp first) or the "
-                f"times to {{output_times}}",
-                path,
-            )
-        return Trajectory.read_kitti(path, np.asarray(stamps, dtype=np.float64))
 
 
 # -- helpers ---------------------------------------------------------------------------------------
@@ -504,184 +478,3 @@ def _staged_copy(sequence: Sequence, mode: str, grayscale: bool | None) -> Seque
     if grayscale is not None and grayscale != sequence.grayscale:
         staged = staged.replace(grayscale=grayscale)
     return staged
-
-
-def _matches(output: Path, pattern: bool) -> list[Path]:
-    if pattern:
-        return [Path(p) for p in glob.glob(str(output), recursive=True) if Path(p).is_file()]
-    return [output] if output.is_file() else []
-
-
-def _stat(path: Path) -> tuple[int, int] | None:
-    try:
-        st = path.stat()
-    except OSError:
-        return None
-    return st.st_mtime_ns, st.st_size
-
-
-def _snapshot(output: Path, pattern: bool, workdir: Path) -> dict[Path, tuple[int, int] | None]:
-    """Files that already match ``output``: those inside ``workdir`` are removed (left from an
-    earlier run there), the others remembered so that an untouched one is not taken for output."""
-    before: dict[Path, tuple[int, int] | None] = {}
-    for path in _matches(output, pattern):
-        if path.resolve().is_relative_to(workdir):
-            path.unlink(missing_ok=True)
-        else:
-            before[path] = _stat(path)
-    return before
-
-
-def _written_since(path: Path, before: dict[Path, tuple[int, int] | None]) -> bool:
-    return path.is_file() and (path not in before or _stat(path) != before[path])
-
-
-def _find_output(output: Path, pattern: bool, before: dict[Path, tuple[int, int] | None]) -> tuple[Path | None, str | None]:
-    found = [p for p in _matches(output, pattern) if _written_since(p, before)]
-    if found:
-        return max(found, key=lambda p: (_stat(p) or (0, 0))[0]), None
-    stale = [p for p in _matches(output, pattern) if p in before]
-    if stale:
-        return None, f"no trajectory written: {stale[0]} is left from before this run (not modified by it)"
-    what = f"no file matches {output}" if pattern else f"{output} not found"
-    return None, f"no trajectory written: {what} (the program must write its trajectory there; see the output option)"
-
-
-def _rescaled(trajectory: Trajectory, scale: float) -> Trajectory:
-    if scale == 1.0:
-        return trajectory
-    return Trajectory(trajectory.timestamps * scale, trajectory.positions, trajectory.quaternions)
-
-
-def _read_json(path: Path, scale: float) -> Trajectory:
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise DatasetError(f"not valid JSON ({exc.msg}, column {exc.colno})", path, exc.lineno) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DatasetError(f"cannot read ({exc})", path) from None
-    if not isinstance(data, list):
-        raise DatasetError('expected a JSON list of {"t": time, "pose": 4x4 matrix or [tx, ty, tz, qx, qy, qz, qw]}', path)
-    stamps, poses = [], []
-    for i, entry in enumerate(data):
-        where = f"entry {i}"
-        if not isinstance(entry, dict) or "t" not in entry or "pose" not in entry:
-            raise DatasetError(f'{where}: expected an object with keys "t" and "pose", got {json.dumps(entry)[:80]}', path)
-        t = entry["t"]
-        if isinstance(t, bool) or not isinstance(t, (int, float)):
-            raise DatasetError(f'{where}: "t" must be a number, got {json.dumps(t)[:40]}', path)
-        try:
-            pose = np.asarray(entry["pose"], dtype=np.float64)
-        except (TypeError, ValueError):
-            raise DatasetError(f'{where}: "pose" must be a 4x4 (or 3x4) matrix or [tx, ty, tz, qx, qy, qz, qw]', path) from None
-        if not np.all(np.isfinite(pose)):
-            raise DatasetError(f'{where}: "pose" holds a non-finite value', path)
-        matrix = np.eye(4)
-        if pose.shape in ((4, 4), (3, 4)):
-            det = np.linalg.det(pose[:3, :3])
-            if abs(det - 1.0) > 1e-2:
-                raise DatasetError(f"{where}: the rotation has determinant {det:.4f}, not 1", path)
-            matrix[:3, :] = pose[:3, :]
-        elif pose.shape == (7,):
-            if np.linalg.norm(pose[3:]) < 1e-9:
-                raise DatasetError(f"{where}: zero-length quaternion", path)
-            matrix[:3, :3] = Rotation.from_quat(pose[3:]).as_matrix()
-            matrix[:3, 3] = pose[:3]
-        else:
-            raise DatasetError(f'{where}: "pose" has shape {pose.shape}; expected 4x4, 3x4 or 7 values [tx, ty, tz, qx, qy, qz, qw]', path)
-        stamps.append(float(t) * scale)
-        poses.append(matrix)
-    if not poses:
-        return Trajectory(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 4)))
-    return Trajectory.from_matrices(np.asarray(stamps), np.asarray(poses))
-
-
-def _states(frame_times: np.ndarray, fps: float, trajectory: Trajectory, keyframes: bool) -> tuple[np.ndarray, Trajectory | None]:
-    """Per-frame states and the poses matched to frames (at the frames' times)."""
-    n = len(frame_times)
-    states = np.full(n, TrackState.NOT_INITIALISED, dtype=np.int8)
-    if not len(trajectory) or not n:
-        return states, None
-    order = np.argsort(trajectory.timestamps, kind="stable")
-    pose_t = trajectory.timestamps[order]
-    right = np.clip(np.searchsorted(pose_t, frame_times), 0, len(pose_t) - 1)
-    left = np.clip(right - 1, 0, len(pose_t) - 1)
-    nearest = np.where(np.abs(pose_t[left] - frame_times) <= np.abs(pose_t[right] - frame_times), left, right)
-    matched = np.abs(pose_t[nearest] - frame_times) < 0.5 / fps
-    if not matched.any():
-        return states, None
-    tracked = matched.copy()
-    if keyframes:
-        hits = np.flatnonzero(matched)
-        tracked[hits[0] : hits[-1] + 1] = True
-    first = int(np.flatnonzero(tracked)[0])
-    states[first:] = TrackState.LOST
-    states[tracked] = TrackState.OK
-    idx = order[nearest[matched]]
-    scored = Trajectory(frame_times[matched], trajectory.positions[idx], trajectory.quaternions[idx])
-    return states, scored
-
-
-def _no_match_message(path: Path | None, frame_times: np.ndarray, fps: float, trajectory: Trajectory, unit: str) -> str:
-    if not len(trajectory):
-        return f"no pose in the trajectory: {path} holds none (nothing tracked)"
-    t = trajectory.timestamps
-    return (
-        f"none of the {len(t)} poses in {path} is within half a frame period ({500.0 / fps:.3g} ms) of a frame time: "
-        f"poses at {t.min():.6f}..{t.max():.6f} s, frames at {frame_times.min():.6f}..{frame_times.max():.6f} s "
-        f"(output read with time_unit={unit!r}; is it right?)"
-    )
-
-
-def _killpg(pid: int, sig: int) -> None:
-    try:
-        os.killpg(pid, sig)
-    except (ProcessLookupError, PermissionError):
-        pass
-
-
-def _exited(process: subprocess.Popen) -> bool:
-    """The process has exited (without reaping it, so that its group id stays reserved)."""
-    if hasattr(os, "waitid"):
-        try:
-            return os.waitid(os.P_PID, process.pid, os.WEXITED | os.WNOHANG | os.WNOWAIT) is not None
-        except ChildProcessError:
-            return True
-    return process.poll() is not None
-
-
-def _run_process(command: list[str], cwd: Path, env: dict[str, str], log_path: Path, timeout: float | None) -> tuple[int | None, bool, float, str | None]:
-    """Run ``command`` in its own process group with stdout and stderr to ``log_path``.
-
-    Returns ``(exit status, timed out, wall time, start error)``; past ``timeout`` the group gets
-    SIGTERM, then SIGKILL after ``KILL_GRACE_S``. Whatever is left of the group when the program
-    exits is killed too.
-    """
-    start = time.monotonic()
-    with open(log_path, "wb") as log:
-        log.write(f"$ {shlex.join(command)}\n".encode())
-        log.flush()
-        try:
-            process = subprocess.Popen(command, cwd=cwd, env=env, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
-        except FileNotFoundError:
-            where = "not on PATH" if os.sep not in command[0] else "no such file"
-            return None, False, time.monotonic() - start, f"executable not found: {command[0]!r} ({where})"
-        except PermissionError:
-            return None, False, time.monotonic() - start, f"executable {command[0]!r} cannot be run (permission denied; is it executable?)"
-        except OSError as exc:
-            return None, False, time.monotonic() - start, f"could not start {command[0]!r}: {exc.strerror or exc}"
-    timed_out = False
-    try:
-        while not _exited(process):
-            if timeout is not None and time.monotonic() - start >= timeout:
-                timed_out = True
-                _killpg(process.pid, signal.SIGTERM)
-                grace_end = time.monotonic() + KILL_GRACE_S
-                while not _exited(process) and time.monotonic() < grace_end:
-                    time.sleep(0.02)
-                break
-            time.sleep(0.02)
-    finally:
-        _killpg(process.pid, signal.SIGKILL)
-        status = process.wait()
-    return status, timed_out, time.monotonic() - start, None
