@@ -28,9 +28,10 @@ of the ``OK`` frames of the largest segment (most ``OK`` frames, the earlier one
 (biggest map, keyframes refined by bundle adjustment); it is saved only when at least one
 frame was ``OK`` (saving a never-initialised map segfaults).
 
-A run in which no frame was tracked is not a failure (``failure`` is ``None``): it is a
-tracking result (``tracking_rate`` 0, ``trajectory`` ``None``). ``failure`` is set only when
-the child did not finish: exit status, signal, timeout. The child writes its per-frame
+A run that ends cleanly but never initialises (no frame tracked) is a failure like for the
+other systems: ``failure`` says so, ``exit_status`` is 0, ``trajectory`` is ``None`` and the
+per-frame states are kept. Otherwise ``failure`` is set when the child did not finish: exit
+status, signal, timeout. The child writes its per-frame
 records about once a second and before shutting down and saving, so a crash in saving or a
 timeout still leaves the per-frame states and poses; ``failure`` then says what was kept and
 ``info["partial"]`` is ``True``.
@@ -305,6 +306,8 @@ class OrbSlam3(SlamSystem):
         phase = data.get("phase")
         failure = outcome.failure
         partial = failure is not None and bool(reported)
+        if failure is None and trajectory is None:
+            failure = f"never initialised: no frame of {n} was tracked"  # the child ran to the end
         if failure is not None:
             if phase in _PHASES:
                 failure += f" {_PHASES[phase]}"
