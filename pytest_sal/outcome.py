@@ -75,7 +75,9 @@ class Outcome:
         dataset: the dataset's name and ``dataset_fingerprint``.
         parameter: the searched parameter's label (``fog.visibility_m``), ``worse`` its
             direction (``lower``/``higher``), ``edge`` the envelope's edge value.
-        requirement: the requirement in words.
+        requirement: the requirement in words; ``criteria`` its pass criteria as
+            ``(metric, op, threshold)`` and ``envelope`` its envelope without the parameter
+            (``>= 25 m``; empty without one).
         verdict: ``passed``, ``failed`` or ``flaky``.
         boundary: the interval found.
         termination: ``tolerance``, ``max_trials``, ``not_bracketed``, ``domain_resolution``
@@ -111,6 +113,8 @@ class Outcome:
     seed: int = 0
     commit: str = ""
     machine: str = ""
+    criteria: list[tuple[str, str, float]] = field(default_factory=list)
+    envelope: str = ""
 
     @property
     def passed(self) -> bool:
@@ -129,4 +133,5 @@ class Outcome:
         data["boundary"] = Boundary(**data["boundary"])
         data["previous"] = None if data.get("previous") is None else Boundary(**data["previous"])
         data["trials"] = [Trial(**t) for t in data.get("trials", [])]
+        data["criteria"] = [(str(m), str(op), float(v)) for m, op, v in data.get("criteria", [])]
         return cls(**data)

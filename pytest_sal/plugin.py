@@ -211,13 +211,10 @@ def pytest_report_teststatus(report: pytest.TestReport, config: pytest.Config) -
     if outcome.termination == "single":
         trial = outcome.trials[0]
         unit = f" {outcome.boundary.unit}" if outcome.boundary.unit else ""
-        from pytest_sal.report import criteria_of
-
-        names = dict.fromkeys(name for name, _, _ in criteria_of(outcome))
+        names = dict.fromkeys(name for name, _, _ in outcome.criteria)
         shown = ", ".join(f"{name} {trial.metrics[name]:.3g}" for name in names if trial.metrics.get(name) is not None)
         return "passed", ".", (f"PASSED ({outcome.parameter} = {trial.value:g}{unit}: {shown})", {"green": True})
     return "passed", ".", (f"PASSED ({outcome.parameter} boundary {outcome.boundary.text()})", {"green": True})
-
 
 
 def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: pytest.Config) -> None:

@@ -28,7 +28,6 @@ from sal_adapters.textfiles import atomic_write_text
 
 __all__ = [
     "COLUMNS",
-    "criteria_of",
     "envelope_text",
     "headline",
     "markdown_report",
@@ -73,7 +72,6 @@ ELLIPSIS = "…"
 #: Metrics shown in the trials tables, in order (others go to the details only through criteria).
 TRIAL_METRICS = ("ate_rmse", "tracking_rate")
 _VERDICT_TEXT = {"passed": "passed", "failed": "FAILED", "flaky": "FLAKY", "regressed": "FAILED"}
-_CRITERION = re.compile(r"\b(" + "|".join(map(re.escape, METRICS)) + r")\s*(<=|>=|<|>)\s*([-+]?[0-9.]+(?:e[-+]?[0-9]+)?)")
 
 
 # ---------------------------------------------------------------- pieces of text
@@ -126,19 +124,7 @@ def metric_text(name: str, value: Any) -> str:
 
 def envelope_text(outcome: Outcome) -> str:
     """The envelope of the requirement without the parameter: ``>= 25 m``; ``-`` without one."""
-    marker = f" wherever {outcome.parameter} "
-    if outcome.parameter and marker in outcome.requirement:
-        return outcome.requirement.split(marker, 1)[1].strip()
-    if outcome.edge is None:
-        return "-"
-    op = ">=" if outcome.worse == "lower" else "<="
-    return f"{op} {with_unit(outcome.edge, outcome.boundary.unit)}"
-
-
-def criteria_of(outcome: Outcome) -> list[tuple[str, str, float]]:
-    """The pass criteria of the requirement, as ``(metric, op, threshold)`` (read from its text)."""
-    text = outcome.requirement.split(" wherever ", 1)[0]
-    return [(m.group(1), m.group(2), float(m.group(3))) for m in _CRITERION.finditer(text)]
+    return outcome.envelope or "-"
 
 
 def boundary_cell(outcome: Outcome) -> str:
@@ -213,7 +199,7 @@ def bracket_trials(outcome: Outcome) -> tuple[Trial | None, Trial | None]:
 def trial_metric_names(outcome: Outcome) -> list[str]:
     """Metrics for a trials table: ``TRIAL_METRICS`` and those of the criteria, in that order."""
     names = list(TRIAL_METRICS)
-    names += [name for name, _, _ in criteria_of(outcome) if name not in names]
+    names += [name for name, _, _ in outcome.criteria if name not in names]
     return names
 
 

@@ -30,7 +30,6 @@ from pytest_sal.report import (
     boundary_cell,
     bracket_trials,
     change_cell,
-    criteria_of,
     envelope_text,
     headline,
     metric_text,
@@ -75,7 +74,7 @@ def metric_figure(outcome: Outcome) -> Figure:
     values = [t.value for t in outcome.trials]
     log_x = bool(values) and min(values) > 0 and max(values) / min(values) >= LOG_SPAN
     xlim = _x_limits(outcome, log_x)
-    thresholds = {name: (op, value) for name, op, value in criteria_of(outcome)}
+    thresholds = {name: (op, value) for name, op, value in outcome.criteria}
     for i, (ax, name) in enumerate(zip(axes, names or ["passed"])):
         if log_x:
             ax.set_xscale("log")
@@ -106,7 +105,7 @@ def _plotted_metrics(outcome: Outcome) -> list[str]:
     def present(name: str) -> bool:
         return any(_finite(t.metrics.get(name)) is not None for t in outcome.trials)
 
-    names = list(dict.fromkeys(name for name, _, _ in criteria_of(outcome)))
+    names = list(dict.fromkeys(name for name, _, _ in outcome.criteria))
     if not names:
         names = [n for n in ("ate_rmse", "tracking_rate") if present(n)]
     return names[:MAX_PANELS]

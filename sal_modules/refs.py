@@ -90,7 +90,11 @@ class Bound:
     def __bool__(self) -> bool:
         raise TypeError(f"{self} is a bound for sal.require(...), not a truth value")
 
+    @property
+    def condition(self) -> str:
+        """The bound without the parameter: ``>= 25 m``."""
+        unit = f" {self.ref.unit}" if self.ref.unit else ""
+        return f"{self.op} {self.value:g}{unit}"
+
     def __str__(self) -> str:
-        unit = self.ref.unit
-        unit = f" {unit}" if unit else ""
-        return f"{self.ref.label} {self.op} {self.value:g}{unit}"
+        return f"{self.ref.label} {self.condition}"

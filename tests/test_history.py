@@ -42,6 +42,7 @@ def fog(pass_value: float | None, fail_value: float | None, *, edge: float = 25.
     fields: dict = {
         "test_id": FOG, "system": "orbslam3", "dataset": "kitti-07", "parameter": "fog.visibility_m", "worse": "lower",
         "edge": edge, "requirement": "ate_rmse < 1.5 m wherever fog.visibility_m >= 25 m", "verdict": verdict,
+        "criteria": [("ate_rmse", "<", 1.5)], "envelope": ">= 25 m",
         "boundary": Boundary(pass_value, fail_value, "m"), "termination": "tolerance", "trials": trials,
     }
     return Outcome(**(fields | kw))
@@ -52,6 +53,7 @@ def drop(pass_value: float | None, fail_value: float | None, *, edge: float = 10
     return Outcome(
         test_id=DROP, system="orbslam3", dataset="kitti-07", parameter="frame_drop.drop_rate", worse="higher", edge=edge,
         requirement="tracking_rate >= 0.9 wherever frame_drop.drop_rate <= 10 %", verdict="passed",
+        criteria=[("tracking_rate", ">=", 0.9)], envelope="<= 10 %",
         boundary=Boundary(pass_value, fail_value, "%"), termination="tolerance",
         trials=[Trial(edge, True, {"ate_rmse": 0.4, "tracking_rate": rate})],
     )
