@@ -22,7 +22,7 @@ OUTDOOR_MODULES = {"fog", "rain", "snow", "night", "sun_glare", "motion_blur"}
 
 
 def _compare_fail(text: str) -> Any:
-    from pytest_sal.history import parse_compare_fail
+    from pytest_sal.regression import parse_compare_fail
 
     return parse_compare_fail(text)
 
@@ -168,7 +168,7 @@ class SalSession:
 
     def search(self, item: pytest.Item, dataset: Any, system: Any, runs: int, workdir: Path) -> Any:
         """Boundary search of ``item``'s requirement; compared with the history when asked."""
-        from pytest_sal.history import warm_start
+        from pytest_sal.regression import warm_start
         from pytest_sal.robustness import search_outcome
 
         requirement = item.function.sal_requirement  # type: ignore[attr-defined]
@@ -197,7 +197,7 @@ class SalSession:
         outcome in the history run compared with, already looked up by the caller)."""
         if self.compare is None or previous is None:
             return outcome
-        from pytest_sal.history import regressions
+        from pytest_sal.regression import regressions
 
         outcome.previous = previous.boundary
         found = regressions(self.checks, outcome, previous)

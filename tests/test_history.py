@@ -15,18 +15,8 @@ import numpy as np
 import pytest
 
 from pytest_sal.cli import main
-from pytest_sal.history import (
-    BoundaryCheck,
-    History,
-    MetricCheck,
-    commit_info,
-    edge_trial,
-    machine_info,
-    outcome_key,
-    parse_compare_fail,
-    regressions,
-    warm_start,
-)
+from pytest_sal.history import History, commit_info, machine_info, outcome_key
+from pytest_sal.regression import BoundaryCheck, MetricCheck, edge_trial, parse_compare_fail, regressions, warm_start
 from pytest_sal.history_command import history_figure
 from pytest_sal.outcome import Boundary, Outcome, Trial
 from sal_adapters import SalError
