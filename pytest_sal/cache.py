@@ -30,8 +30,6 @@ from __future__ import annotations
 
 import dataclasses
 import enum
-import errno
-import fcntl
 import hashlib
 import json
 import math
@@ -43,9 +41,10 @@ import time
 import warnings
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path, PurePath
-from typing import Any, NamedTuple, Self
+from typing import Any, NamedTuple
 
 from sal_adapters.errors import SalError
+from sal_adapters.file_lock import FileLock
 
 __all__ = [
     "DEFAULT_CACHE_DIR",
@@ -316,7 +315,7 @@ class ContentCache:
 
     # ---- locking
 
-    def lock(self, key: str) -> _KeyLock:
+    def lock(self, key: str) -> FileLock:
         """The exclusive lock of ``key`` as a context manager (``with cache.lock(key): ...``).
 
         It is an ``flock(2)`` on ``root/locks/<key>.lock``, released when the holder exits or
@@ -324,7 +323,7 @@ class ContentCache:
         """
         _check_key(key)
         self._ensure_root()
-        return _KeyLock(self.root / "locks" / f"{key}.lock")
+        return FileLock(self.root / "locks" / f"{key}.lock")
 
     # ---- maintenance
 
@@ -482,7 +481,7 @@ class ContentCache:
                 yield _Entry(key, Path(child.path), is_dir, size, info.st_mtime_ns)
 
     def _remove_entry(self, entry: _Entry) -> bool:
-        lock = _KeyLock(self.root / "locks" / f"{entry.key}.lock")
+        lock = FileLock(self.root / "locks" / f"{entry.key}.lock")
         if not lock.acquire(blocking=False):
             return False
         try:
@@ -513,68 +512,12 @@ class ContentCache:
                 if holding:
                     _remove_path(Path(child.path))
                     continue
-                lock = _KeyLock(self.root / "locks" / f"{match['key']}.lock")
+                lock = FileLock(self.root / "locks" / f"{match['key']}.lock")
                 if lock.acquire(blocking=False):
                     try:
                         _remove_path(Path(child.path))
                     finally:
                         lock.release()
-
-
-class _KeyLock:
-    """An exclusive ``flock`` on a lock file that is unlinked on release.
-
-    Unlinking is safe because a process that locked a file checks, once it holds the lock,
-    that the path still names that file; when it does not (the holder unlinked it meanwhile),
-    it locks the new file instead.
-    """
-
-    def __init__(self, path: Path):
-        self.path = path
-        self._fd: int | None = None
-
-    def acquire(self, blocking: bool = True) -> bool:
-        while True:
-            try:
-                fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
-            except FileNotFoundError:  # locks/ removed by hand: make it again
-                self.path.parent.mkdir(parents=True, exist_ok=True)
-                continue
-            except OSError as exc:
-                raise CacheError(f"cannot open lock file: {exc.strerror}", self.path) from None
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | (0 if blocking else fcntl.LOCK_NB))
-            except OSError as exc:
-                os.close(fd)
-                if exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN):
-                    return False
-                raise CacheError(f"cannot lock: {exc.strerror}", self.path) from None
-            try:
-                same = os.stat(self.path).st_ino == os.fstat(fd).st_ino
-            except FileNotFoundError:
-                same = False
-            if same:
-                self._fd = fd
-                return True
-            os.close(fd)
-
-    def release(self) -> None:
-        if self._fd is None:
-            return
-        try:
-            os.unlink(self.path)
-        except FileNotFoundError:
-            pass
-        finally:
-            os.close(self._fd)
-            self._fd = None
-
-    def __enter__(self) -> Self:
-        self.acquire()
-        return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        self.release()
 
 
 def _scandir(folder: Path) -> list[os.DirEntry[str]]:

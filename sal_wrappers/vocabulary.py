@@ -28,12 +28,8 @@ import numpy as np
 
 from sal_adapters.cache_dir import user_cache_dir
 from sal_adapters.errors import DatasetError
+from sal_adapters.file_lock import FileLock
 from sal_adapters.textfiles import atomic_write_text
-
-try:  # POSIX; elsewhere concurrent builds are not serialised
-    import fcntl
-except ImportError:  # pragma: no cover
-    fcntl = None  # type: ignore[assignment]
 
 __all__ = [
     "BUILDER_VERSION",
@@ -419,9 +415,7 @@ def ensure_vocabulary(
     if target.is_file():
         return target
     folder.mkdir(parents=True, exist_ok=True)
-    with open(folder / f".{target.name}.lock", "w") as lock:
-        if fcntl is not None:
-            fcntl.flock(lock, fcntl.LOCK_EX)
+    with FileLock(folder / f".{target.name}.lock"):
         if not target.is_file():  # another process may have built it while we waited
             started = time.perf_counter()
             images = orb_image_descriptors(synthetic_training_images(seed, frames, progress))
