@@ -256,24 +256,24 @@ def _slam_table(summary: dict[str, Any]) -> str:
     units = {key: METRICS[key].unit if key != "tracking_rate" else "" for key, _, _ in SLAM_COLUMNS}
     head = "<th>sequence</th><th class='num'>runs ok</th>" + "".join(
         f"<th class='num'>{_e(h)}{f' [{units[key]}]' if units[key] else ''} median</th>" for key, h, _ in SLAM_COLUMNS
-    ) + "<th class='num'>ATE min .. max [m]</th><th>failures</th>"
-    rows = []
+    ) + "<th class='num'>ATE min .. max [m]</th>"
+    rows, failures = [], []
     for name in order:
         entry = summary.get(name) if name == CLEAN else (summary.get("perturbations") or {}).get(name)
         if not isinstance(entry, dict):
             continue
-        runs, failures = int(entry.get("runs", 0)), int(entry.get("failures", 0))
-        cells = [f"<td>{_e(name)}</td>", f"<td class='num'>{runs - failures}/{runs}</td>"]
+        runs, failed = int(entry.get("runs", 0)), int(entry.get("failures", 0))
+        cells = [f"<td>{_e(name)}</td>", f"<td class='num'>{runs - failed}/{runs}</td>"]
         for key, _, spec in SLAM_COLUMNS:
             cells.append(f"<td class='num'>{_e(_stat(entry.get(key), 'median', spec))}</td>")
         ate = entry.get("ate_rmse")
         cells.append(f"<td class='num'>{_e(_stat(ate, 'min', '.4f'))} .. {_e(_stat(ate, 'max', '.4f'))}</td>")
-        reasons = "; ".join(f"run {r.get('run')}: {r.get('reason')}" if isinstance(r, dict) else str(r) for r in entry.get("failure_reasons") or [])
-        cells.append(f"<td class='bad'>{_e(reasons)}</td>")
-        rows.append(f"<tr class='{'failed' if failures else 'passed'}'>{''.join(cells)}</tr>")
+        failures += [f"{name}, run {r.get('run')}: {r.get('reason')}" if isinstance(r, dict) else f"{name}: {r}" for r in entry.get("failure_reasons") or []]
+        rows.append(f"<tr class='{'failed' if entry.get('failures') else 'passed'}'>{''.join(cells)}</tr>")
     runs = summary.get("run_count", "?")
+    listed = f"<ul class='failures'>{''.join(f'<li>{_e(f)}</li>' for f in failures)}</ul>" if failures else ""
     return (f"<p class='dim'>{_e(summary.get('sequence', ''))}, {_e(summary.get('frames', '?'))} frames, {_e(runs)} run(s) per sequence</p>"
-            f"<table class='slam'><thead><tr>{head}</tr></thead><tbody>{''.join(rows)}</tbody></table>")
+            f"<table class='slam'><thead><tr>{head}</tr></thead><tbody>{''.join(rows)}</tbody></table>{listed}")
 
 
 # ---------------------------------------------------------------- boundary searches
@@ -311,8 +311,9 @@ def _trials_table(trials: list[Any], unit: str) -> str:
     rows = []
     for i, t in enumerate(t for t in trials if isinstance(t, dict)):
         m = t.get("metrics") or {}
-        note = ", ".join(x for x, on in (("cached", t.get("cached")), ("repeat", t.get("repeat"))) if on)
-        cells = [str(i + 1), _value(t.get("value")), str(t.get("verdict", "?")), _fmt(m.get("ate_rmse"), ".4f"), _fmt(m.get("tracking_rate"), ".0%"), note, "; ".join(t.get("failed") or [])]
+        notes = [x for x, on in (("cached", t.get("cached")), ("repeat", t.get("repeat"))) if on]
+        failed = "; ".join(t.get("failed") or []) + "".join(f" ({why})" for why in m.get("failures") or [])  # why a metric is missing
+        cells = [str(i + 1), _value(t.get("value")), str(t.get("verdict", "?")), _fmt(m.get("ate_rmse"), ".4f"), _fmt(m.get("tracking_rate"), ".0%"), ", ".join(notes), failed]
         numeric = {0, 1, 3, 4}
         rows.append(f"<tr class='{'passed' if t.get('verdict') == 'pass' else 'failed'}'>"
                     + "".join(f"<td{' class=num' if j in numeric else ''}>{_e(c)}</td>" for j, c in enumerate(cells)) + "</tr>")
@@ -409,5 +410,6 @@ img.plot { max-width: 900px; }
 .pair { display: flex; flex-wrap: wrap; gap: 1em; }
 img.half { display: block; max-width: 49%; height: auto; border: 1px solid #e5e7eb; border-radius: 4px; }
 table.slam tr.failed td:first-child { color: #b42318; font-weight: 600; }
+ul.failures { color: #b42318; margin-top: 0; }
 section.problems { border: 1px solid #cf222e; border-radius: 6px; padding: .5em 1.2em; background: #fff5f5; }
 """
