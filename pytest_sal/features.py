@@ -23,6 +23,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
+from tqdm import tqdm
 
 from pytest_sal.plots import save_png
 from pytest_sal.superpoint import SuperPointExtractor
@@ -185,7 +186,8 @@ def track_features(sequence: Sequence | Iterable[np.ndarray], extractor: Feature
     match each frame to the next; the first ``max_frames`` frames only when given."""
     detections: list[int] = []
     matches: list[int] = []
-    lengths: list[int] = []
+    lengths = np.zeros(1024, dtype=np.int64)  # frames each track lasted, grown by doubling
+    tracks = 0
     previous: tuple[np.ndarray, np.ndarray] | None = None  # (descriptors, track id per keypoint)
     for position, item in enumerate(sequence):
         if max_frames is not None and position >= max_frames:
@@ -197,22 +199,27 @@ def track_features(sequence: Sequence | Iterable[np.ndarray], extractor: Feature
             pairs = np.asarray(extractor.match(previous[0], descriptors), dtype=np.int64).reshape(-1, 2)
             matches.append(len(pairs))
             ids[pairs[:, 1]] = previous[1][pairs[:, 0]]
-            for track in ids[pairs[:, 1]]:
-                lengths[track] += 1
+            lengths[ids[pairs[:, 1]]] += 1  # matches are one-to-one: each track id at most once
         new = ids < 0
-        ids[new] = np.arange(len(lengths), len(lengths) + int(new.sum()))
-        lengths.extend([1] * int(new.sum()))
+        started = int(new.sum())
+        while tracks + started > len(lengths):
+            lengths = np.concatenate([lengths, np.zeros_like(lengths)])
+        ids[new] = np.arange(tracks, tracks + started)
+        lengths[tracks : tracks + started] = 1
+        tracks += started
         detections.append(len(keypoints))
         previous = (descriptors, ids)
     if not detections:
         raise SalError("feature tracking needs at least one frame; the sequence is empty")
-    return TrackingStats(extractor.name, np.array(detections, dtype=np.int64), np.array(matches, dtype=np.int64), np.array(lengths, dtype=np.int64))
+    return TrackingStats(extractor.name, np.array(detections, dtype=np.int64), np.array(matches, dtype=np.int64), lengths[:tracks].copy())
 
 
-def compare_features(sequences: dict[str, Sequence], extractors: list[FeatureExtractor], out_dir: str | Path, max_frames: int | None = None) -> dict[str, dict[str, Any]]:
-    """Track every feature type through every sequence and write, per feature type,
-    ``out_dir/<feature>/summary.json`` (per sequence: ``TrackingStats.to_dict()``),
-    ``track_survival.png`` and ``detections.png``.
+def compare_features(
+    sequences: dict[str, Sequence], extractors: list[FeatureExtractor], out_dir: str | Path, max_frames: int | None = None, *, progress: bool = False
+) -> dict[str, dict[str, Any]]:
+    """Track every feature type through every sequence (``progress``: a bar per sequence) and
+    write, per feature type, ``out_dir/<feature>/summary.json`` (per sequence:
+    ``TrackingStats.to_dict()``), ``track_survival.png`` and ``detections.png``.
 
     Returns ``{feature: {"stats": {sequence name: TrackingStats}, "summary": path,
     "track_survival": path, "detections": path}}``.
@@ -227,7 +234,11 @@ def compare_features(sequences: dict[str, Sequence], extractors: list[FeatureExt
     out_dir = Path(out_dir)
     results: dict[str, dict[str, Any]] = {}
     for extractor in extractors:
-        stats = {name: track_features(seq, extractor, max_frames) for name, seq in sequences.items()}
+        stats = {}
+        for name, seq in sequences.items():
+            total = len(seq) if max_frames is None else min(len(seq), max_frames)
+            frames = tqdm(seq, total=total, desc=f"{extractor.name} {name}", unit="frame", disable=not progress, leave=False)
+            stats[name] = track_features(frames, extractor, max_frames)
         folder = out_dir / extractor.name
         summary = {"feature": extractor.name, "extractor": repr(extractor), "sequences": {n: s.to_dict() for n, s in stats.items()}}
         summary_path = atomic_write_text(folder / "summary.json", json.dumps(summary, indent=2, allow_nan=False) + "\n")

@@ -46,7 +46,7 @@ def run_features(config_path: Path, features: str, *, model: Path | None = None,
     extractors = parse_features(features, model=model, max_keypoints=max_keypoints)
     sequences = perturbed_sequences(config, build_sequence(config))
     out_dir = config.output_dir() / "features"
-    results = compare_features(sequences, extractors, out_dir, max_frames=max_frames)
+    results = compare_features(sequences, extractors, out_dir, max_frames=max_frames, progress=True)
     for feature, result in results.items():
         print(f"{feature}:")
         for name, stats in result["stats"].items():
