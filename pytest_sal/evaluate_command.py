@@ -9,7 +9,8 @@ Under ``<output_dir>/slam_results/<algo>/``::
     metrics/run_<k>/<perturbation>/vs_baseline.json                  against the baseline of run k
     metrics/summary.json, aggregated_metrics.png                     over runs
     metrics/comparison/run_<k>/ate_comparison.png
-    trajectory_plots/comparison/run_<k>/trajectory_comparison_xz.png
+    trajectory_plots/comparison/run_<k>/trajectory_comparison_xz.png    aligned estimates, top view
+    trajectory_plots/comparison/run_<k>/trajectory_comparison_error.png translation error over time
     work/run_<k>/<name>/                                             the system's own files and logs
 
 Unlike the reference implementation, the baseline is run once per run number and reused for
@@ -54,7 +55,7 @@ Writes <base_dir>/<name>/slam_results/<SLAM>/: trajectories/run_<k>/{baseline,<p
 metrics/run_<k>/<perturbation>/{ate,vs_baseline}.json, metrics/summary.json (median, mean, std,
 min, max over runs; failures with reasons), metrics/aggregated_metrics.png,
 metrics/comparison/run_<k>/ate_comparison.png and
-trajectory_plots/comparison/run_<k>/trajectory_comparison_xz.png.
+trajectory_plots/comparison/run_<k>/trajectory_comparison_{xz,error}.png (top view, error over time).
 """
 
 
@@ -282,7 +283,7 @@ def _summary(all_metrics: dict[str, list[Any]], slam: str, system: Any, config: 
 
 # -- plots ---------------------------------------------------------------------------------------
 def _run_plots(root: Path, k: int, run_metrics: dict[str, Any], groundtruth: Trajectory | None, out: Callable[[str], None]) -> None:
-    from pytest_sal.plots import plot_trajectories
+    from pytest_sal.plots import plot_ate_over_time, plot_trajectories
 
     _try_plot(lambda: _ate_bar_plot(run_metrics, root / "metrics" / "comparison" / f"run_{k}" / "ate_comparison.png", k), out)
     estimates = {name: m.ate.estimate for name, m in run_metrics.items() if m.ate is not None}
@@ -290,6 +291,10 @@ def _run_plots(root: Path, k: int, run_metrics: dict[str, Any], groundtruth: Tra
         path = root / "trajectory_plots" / "comparison" / f"run_{k}" / "trajectory_comparison_xz.png"
         path.parent.mkdir(parents=True, exist_ok=True)
         _try_plot(lambda: plot_trajectories(groundtruth, estimates, path, title=f"Trajectories, run {k} (aligned, xz)", plane="xz"), out)
+    ates = {name: m.ate for name, m in run_metrics.items() if m.ate is not None}
+    if ates:  # the errors the top view is too coarse to show
+        error_path = root / "trajectory_plots" / "comparison" / f"run_{k}" / "trajectory_comparison_error.png"
+        _try_plot(lambda: plot_ate_over_time(ates, error_path, title=f"Translation error over time, run {k}"), out)
 
 
 def _try_plot(draw: Callable[[], Any], out: Callable[[str], None]) -> None:

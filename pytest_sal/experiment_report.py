@@ -243,11 +243,10 @@ def _slam_section(page: _Page) -> str:
         parts.append(page.picture(system / "metrics" / "aggregated_metrics.png", f"slam/{system.name}/aggregated_metrics.png", f"{system.name}: metrics over runs"))
         for k in range(1, int(summary.get("run_count", 1)) + 1):
             ate = page.picture(system / "metrics" / "comparison" / f"run_{k}" / "ate_comparison.png", f"slam/{system.name}/run_{k}/ate.png", f"ATE per sequence, run {k}", "half")
-            traj = page.picture(
-                system / "trajectory_plots" / "comparison" / f"run_{k}" / "trajectory_comparison_xz.png",
-                f"slam/{system.name}/run_{k}/trajectories.png", f"trajectories, run {k}", "half",
-            )
-            parts.append(f"<h4>run {k}</h4><div class='pair'>{ate}{traj}</div>")
+            plots = system / "trajectory_plots" / "comparison" / f"run_{k}"
+            traj = page.picture(plots / "trajectory_comparison_xz.png", f"slam/{system.name}/run_{k}/trajectories.png", f"trajectories, run {k}", "half")
+            error = page.picture(plots / "trajectory_comparison_error.png", f"slam/{system.name}/run_{k}/error.png", f"translation error over time, run {k}", "half")
+            parts.append(f"<h4>run {k}</h4><div class='pair'>{ate}{traj}{error}</div>")
     return "<section>" + "\n".join(parts) + "</section>"
 
 

@@ -115,6 +115,7 @@ def test_evaluate_writes_the_paper_tree(tmp_path: Path, systems: None, capsys: p
         for png in (
             root / "metrics" / "comparison" / f"run_{k}" / "ate_comparison.png",
             root / "trajectory_plots" / "comparison" / f"run_{k}" / "trajectory_comparison_xz.png",
+            root / "trajectory_plots" / "comparison" / f"run_{k}" / "trajectory_comparison_error.png",
         ):
             assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 1000
     assert (root / "metrics" / "aggregated_metrics.png").stat().st_size > 1000

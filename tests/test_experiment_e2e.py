@@ -267,6 +267,7 @@ def test_evaluate_writes_the_paper_tree(
         expected |= {f"metrics/run_{k}/{n}/ate.json" for n in names}
         expected |= {f"metrics/run_{k}/{p}/vs_baseline.json" for p in PERTURBATIONS}
         expected |= {f"metrics/comparison/run_{k}/ate_comparison.png", f"trajectory_plots/comparison/run_{k}/trajectory_comparison_xz.png"}
+        expected.add(f"trajectory_plots/comparison/run_{k}/trajectory_comparison_error.png")
     assert {f for f in files_under(root) if not f.startswith("work/")} == expected
 
     for k in ks:
@@ -322,6 +323,7 @@ def test_evaluate_writes_the_paper_tree(
 
         assert png_size(root / "metrics" / "comparison" / f"run_{k}" / "ate_comparison.png")
         assert png_size(root / "trajectory_plots" / "comparison" / f"run_{k}" / "trajectory_comparison_xz.png")
+        assert png_size(root / "trajectory_plots" / "comparison" / f"run_{k}" / "trajectory_comparison_error.png")
     assert png_size(root / "metrics" / "aggregated_metrics.png")
 
     # summary.json: per sequence, median / mean / std / min / max of each metric over the runs

@@ -97,8 +97,8 @@ def test_page_shows_every_part_with_the_numbers_of_the_result_files(experiment: 
     assert "rain(intensity_mm_h=20" in text and "lens_soiling(particles=30" in text  # the composite's steps, in order
     assert "http://" not in text and "https://" not in text  # self-contained: nothing fetched
     images = page_images(report)
-    # 3 frames, aggregated + ATE + trajectories, boundary plot, survival + detections
-    assert len(images) == 3 + 3 + 1 + 2
+    # 3 frames, aggregated + ATE + trajectories + error over time, boundary plot, survival + detections
+    assert len(images) == 3 + 4 + 1 + 2
     assert all(p.is_file() and p.resolve().is_relative_to(report.parent.resolve()) for p in images)
 
 
