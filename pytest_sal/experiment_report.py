@@ -177,7 +177,7 @@ def _frames_section(page: _Page, pipeline: dict[str, Any] | None) -> str:
         module = (recorded.get(name) or {}).get("module")
         caption = "clean sequence" if name == CLEAN and module is None else _module_text(module)
         figures.append(
-            f"<figure><img src='{_src(target, page.out_dir)}' width='{thumb.shape[1]}' height='{thumb.shape[0]}' alt='{_e(name)} at t={seq.timestamps[at]:.2f} s'>"
+            f"<figure style='width: {thumb.shape[1]}px'><img src='{_src(target, page.out_dir)}' width='{thumb.shape[1]}' height='{thumb.shape[0]}' alt='{_e(name)} at t={seq.timestamps[at]:.2f} s'>"
             f"<figcaption><b>{_e(name)}</b><br><span class='dim'>{_e(caption)}</span></figcaption></figure>"
         )
     return f"<section>{heading}<p class='dim'>the same moment, t = {moment:.2f} s, in every sequence</p><div class='gallery frames'>{''.join(figures)}</div></section>"
@@ -403,7 +403,7 @@ section { margin: 1.4em 0 2.2em; }
 h2 { border-bottom: 1px solid #d0d7de; padding-bottom: .25em; }
 h4 { margin: 1em 0 .3em; font-size: .95em; }
 img.plot { max-width: 900px; }
-.gallery.frames figure { border-color: #d0d7de; max-width: 380px; }
+.gallery.frames figure { border-color: #d0d7de; }
 .gallery.frames img { width: auto; }
 .gallery.frames figcaption { text-align: left; overflow-wrap: anywhere; }
 .pair { display: flex; flex-wrap: wrap; gap: 1em; }

@@ -158,7 +158,7 @@ def test_broken_and_missing_parts_are_named_and_the_rest_is_built(experiment: Pa
     assert warnings == [expected]
     assert "<h2>Left out</h2>" in text and "unreadable: slam_results/reference_vo/metrics/summary.json" in text
     assert "no feature tracking: run <code>sal features CONFIG --features orb</code>" in text
-    assert text.count("<figure>") == 3 and "fog_visibility" in text  # frames and boundary still there
+    assert text.count(f"<figure style='width: {THUMBNAIL_WIDTH}px'>") == 3 and "fog_visibility" in text  # frames and boundary still there
 
 
 def test_a_folder_without_results_is_one_clear_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -172,3 +172,22 @@ def test_a_folder_without_results_is_one_clear_error(tmp_path: Path, capsys: pyt
     (tmp_path / "file").write_text("")
     with pytest.raises(SalError, match=r"report folder .*file is a file; give a folder for index.html and assets/"):
         write_experiment_report(tmp_path / "empty", tmp_path / "file")
+
+
+def test_report_on_real_kitti_frames(shared_data: Path, tmp_path: Path) -> None:
+    """The example frames of a real dataset: KITTI's grey images, reopened from its own layout."""
+    config = tmp_path / "kitti.yaml"
+    config.write_text(yaml.safe_dump({
+        "experiment": {"name": "kitti_soiling", "seed": 1},
+        "dataset": {"type": "kitti", "path": str(shared_data / "kitti" / "sequences" / "07"), "max_frames": 5},
+        "perturbations": [{"name": "soiling", "type": "lens_soiling", "parameters": {"particles": 200}}],
+        "output": {"base_dir": str(tmp_path / "results")},
+    }))
+    assert main(["perturb", str(config), "--cache-dir", str(tmp_path / "cache")]) == 0
+    page = write_experiment_report(config, warn=lambda message: pytest.fail(f"unexpected warning: {message}"))
+    frames = page.parent / "assets" / "frames"
+    clean, soiled = (read_image(frames / f"{name}.png").astype(np.float64) for name in ("baseline", "soiling"))
+    middle = build_sequence(load_config(config))[2].image
+    assert np.array_equal(clean, cv2.resize(middle, clean.shape[1::-1], interpolation=cv2.INTER_AREA))
+    assert (clean[..., 0] == clean[..., 1]).all()  # grey KITTI, expanded to RGB
+    assert 1.0 < np.abs(soiled - clean).mean() and "no SLAM runs: run <code>sal evaluate CONFIG --slam NAME</code>" in page.read_text()
