@@ -99,9 +99,7 @@ def write_experiment_report(folder: str | Path, out_dir: str | Path | None = Non
     """
     folder = Path(folder).expanduser()
     if folder.is_file() and folder.suffix.lower() in (".yaml", ".yml"):
-        from pytest_sal.experiment import load_config
-
-        folder = load_config(folder).output_dir()
+        folder = _results_folder(folder)
     if not folder.is_dir():
         raise SalError(f"experiment folder not found: {folder} (give <output.base_dir>/<experiment.name>)")
     parts = ("images", "slam_results", "robustness_boundary", "features")
@@ -136,6 +134,19 @@ def write_experiment_report(folder: str | Path, out_dir: str | Path | None = Non
         sections="\n".join(sections),
     )
     return atomic_write_text(out_dir / "index.html", text)
+
+
+def _results_folder(config_path: Path) -> Path:
+    """The config's results folder; with ``create_timestamp_dir`` the newest ``<name>_<time>``."""
+    from pytest_sal.experiment import load_config
+
+    config = load_config(config_path)
+    if not config.output.create_timestamp_dir:
+        return config.output_dir()
+    runs = sorted(config.output.base_dir.glob(f"{config.experiment.name}_????????_??????"))
+    if not runs:
+        raise SalError(f"{config_path}: no results folder {config.output.base_dir / config.experiment.name}_<YYYYmmdd_HHMMSS> yet; run sal perturb or sal evaluate on it first")
+    return runs[-1]  # the timestamps sort in time order
 
 
 # ---------------------------------------------------------------- example frames

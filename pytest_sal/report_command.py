@@ -12,6 +12,7 @@ examples:
   sal report results/fog_rain_urban
   sal report results/fog_rain_urban -o /tmp/fog-report
   sal report example_suites/configs/fog_rain_urban.yaml     # the config's results folder
+                                   # (the newest one when output.create_timestamp_dir is true)
 
 DIR is <output.base_dir>/<experiment.name>, where sal perturb, evaluate, boundary and features
 wrote their results. The page shows example frames of every perturbation at the same moment,

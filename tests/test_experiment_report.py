@@ -191,3 +191,13 @@ def test_report_on_real_kitti_frames(shared_data: Path, tmp_path: Path) -> None:
     assert np.array_equal(clean, cv2.resize(middle, clean.shape[1::-1], interpolation=cv2.INTER_AREA))
     assert (clean[..., 0] == clean[..., 1]).all()  # grey KITTI, expanded to RGB
     assert 1.0 < np.abs(soiled - clean).mean() and "no SLAM runs: run <code>sal evaluate CONFIG --slam NAME</code>" in page.read_text()
+
+
+def test_report_of_a_config_with_timestamped_folders_takes_the_newest(tmp_path: Path) -> None:
+    config = tmp_path / "exp.yaml"
+    config.write_text(yaml.safe_dump({**CONFIG, "output": {"base_dir": str(tmp_path / "out"), "create_timestamp_dir": True}}))
+    with pytest.raises(SalError, match=r"no results folder .*report_demo_<YYYYmmdd_HHMMSS> yet; run sal perturb"):
+        write_experiment_report(config)
+    for stamp in ("20261201_090000", "20261201_101500", "20261130_235959"):
+        (tmp_path / "out" / f"report_demo_{stamp}" / "features").mkdir(parents=True)
+    assert write_experiment_report(config, warn=print) == tmp_path / "out" / "report_demo_20261201_101500" / "report" / "index.html"
