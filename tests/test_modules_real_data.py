@@ -70,3 +70,24 @@ def test_every_module_on_kitti_mono_with_a_monocular_depth_model(name: str, shar
     if sal_modules.module_class(name).needs_depth:
         with pytest.raises(sal_modules.DepthUnavailable, match="kitti/07"):
             perturb(clean, module, seed=1)  # no stereo, no depth maps, no model: one clear error
+
+
+@pytest.mark.parametrize("name", ["rain", "snow"])
+def test_precipitation_indoors_keeps_unknown_depth_in_the_room(name: str, shared_data: Path) -> None:
+    """EuRoC's overexposed window and part of the wall have no stereo depth. Taken as the 1 km
+    cloud base they turn to the airlight; with the room's size (sky_distance_m=4) they stay
+    about as they are, while the measured pixels are perturbed the same either way."""
+    from sal_modules.depth import StereoDepth
+
+    clean = euroc(shared_data)
+    depth = StereoDepth().compute(clean, 0, "left")
+    unknown = depth <= 0
+    assert 0.01 < unknown.mean() < 0.5  # the window and the border: a real share of the frame
+    original = clean[0].image.astype(np.float64)
+    outdoors, indoors = (
+        perturb(clean, create(name, intensity_mm_h=10.0, **extra), seed=1, depth="stereo")[0].image.astype(np.float64)
+        for extra in ({}, {"sky_distance_m": 4.0})
+    )
+    change_out, change_in = (np.abs(img - original).mean(axis=2) for img in (outdoors, indoors))
+    assert change_in[unknown].mean() < 0.3 * change_out[unknown].mean()
+    assert change_in[~unknown].mean() == pytest.approx(change_out[~unknown].mean(), rel=0.05)

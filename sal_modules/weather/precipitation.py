@@ -44,8 +44,10 @@ the empirical beta = 0.312 R^0.67 km^-1 (within ~15 % from 1 to 300 mm/h). In li
     I = (J t + A (1 - t)) (1 - alpha) + L_p alpha,    t = exp(-beta r)
 
 with A the airlight (estimated once per sequence, as for fog), L_p the particle radiance and r
-the distance along the line of sight; pixels without depth (sky) are at the cloud base,
-``SKY_DISTANCE_M`` = 1 km, where the precipitation comes from.
+the distance along the line of sight; pixels without depth (sky) are at ``sky_distance_m``,
+by default the cloud base, ``SKY_DISTANCE_M`` = 1 km, where the precipitation comes from.
+Indoors unknown depth is a window or a wall a few metres away: give the room's size there, or
+those pixels turn to the airlight.
 """
 
 from __future__ import annotations
@@ -122,6 +124,7 @@ class Precipitation(Perturbation):
     exposure_ms = Param(5.0, unit="ms", min=0.1, max=100.0, doc="exposure time: streak length")
     wind_mps = Param(0.0, unit="m/s", min=-40.0, max=40.0, doc="wind speed along the camera's x axis (right = positive)")
     aperture_mm = Param(2.0, unit="mm", min=0.0, max=50.0, doc="entrance pupil diameter: defocus of near particles (focus at infinity)")
+    sky_distance_m = Param(SKY_DISTANCE_M, unit="m", min=0.1, max=1e5, doc="distance of pixels without depth: the cloud base outdoors, the room's size indoors")
 
     # -- particle physics, per subclass --------------------------------------------------------
     @abstractmethod
@@ -248,7 +251,7 @@ class Precipitation(Perturbation):
         if key not in self._lengths:
             self._lengths[key] = ray_lengths(self.ready_context().camera_for(stream), depth.shape)
         distance = cv2.multiply(depth.astype(np.float32, copy=False), self._lengths[key], dst=scratch("precipitation.t", depth.shape))
-        distance[depth <= 0] = SKY_DISTANCE_M
+        distance[depth <= 0] = self.sky_distance_m
         t = cv2.exp(cv2.multiply(distance, -self.extinction(self.rate), dst=distance), dst=distance)
         clear = cv2.subtract(1.0, alpha, dst=scratch("precipitation.clear", depth.shape))
         gain = cv2.multiply(t, clear, dst=t)
@@ -287,7 +290,7 @@ class Precipitation(Perturbation):
         pu = np.clip(np.rint(su), 0, w - 1).astype(np.int64)
         pv = np.clip(np.rint(sv), 0, h - 1).astype(np.int64)
         surface = depth[pv, pu]
-        seen = (surface <= 0) | (z[owner] <= surface)
+        seen = z[owner] <= np.where(surface > 0, surface, self.sky_distance_m)
         owner, su, sv = owner[seen], su[seen], sv[seen]
         weight = (ink * scale * scale / count)[owner]
         density = self._splat(su, sv, weight, level[owner], (h, w))
