@@ -19,17 +19,15 @@ A part that is missing is named with the command that makes it; a part that cann
 
 from __future__ import annotations
 
-import html
 import json
 import shutil
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
-from urllib.parse import quote
 
 import numpy as np
 
-from pytest_sal.report_html import REPORT_CSS
+from pytest_sal.report_html import REPORT_CSS, asset_src, esc
 from pytest_sal.requirements import METRICS
 from sal_adapters import SalError, Sequence, open_dataset
 from sal_adapters.datasets import WRITTEN_MARKER
@@ -67,6 +65,15 @@ class _Page:
             return self.problem(f"{self.rel(path)}: holds a JSON {type(data).__name__}, not an object; its part of the report is left out")
         return data
 
+    def summaries(self, part: str, pattern: str) -> list[tuple[Path, dict[str, Any]]] | None:
+        """The readable JSON files matching ``pattern`` under ``folder/part``, sorted by path;
+        ``None`` when there is none at all (that command was not run)."""
+        root = self.folder / part
+        paths = sorted(root.glob(pattern)) if root.is_dir() else []
+        if not paths:
+            return None
+        return [(path, data) for path in paths if (data := self.json(path)) is not None]
+
     def problem(self, message: str) -> None:
         """Note ``message`` on the page and warn; returns ``None`` for ``return page.problem(...)``."""
         self.problems.append(message)
@@ -75,11 +82,11 @@ class _Page:
     def picture(self, source: Path, name: str, alt: str, css: str = "plot") -> str:
         """Copy the PNG ``source`` to ``assets/<name>`` and return its <img>, or a note when absent."""
         if not source.is_file():
-            return f"<p class='dim'>missing: {_e(self.rel(source))}</p>"
+            return f"<p class='dim'>missing: {esc(self.rel(source))}</p>"
         target = self.out_dir / "assets" / name
         target.parent.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(source, target)
-        return f"<img class='{css}' src='{_src(target, self.out_dir)}' alt='{_e(alt)}' loading='lazy'>"
+        return f"<img class='{css}' src='{asset_src(target, self.out_dir)}' alt='{esc(alt)}' loading='lazy'>"
 
     def rel(self, path: Path) -> str:
         try:
@@ -125,11 +132,11 @@ def write_experiment_report(folder: str | Path, out_dir: str | Path | None = Non
     name = (pipeline or {}).get("experiment") or folder.name
     dataset = (pipeline or {}).get("dataset") or {}
     where = f"{dataset.get('type', '')} {dataset.get('name', '')}, {dataset.get('frames', '?')} frames" if dataset else ""
-    problems = "".join(f"<li>{_e(p)}</li>" for p in page.problems)
+    problems = "".join(f"<li>{esc(p)}</li>" for p in page.problems)
     text = _PAGE.format(
-        title=_e(f"Experiment {name}"),
+        title=esc(f"Experiment {name}"),
         css=REPORT_CSS + _EXTRA_CSS,
-        where=_e(f"{where} - {folder}" if where else str(folder)),
+        where=esc(f"{where} - {folder}" if where else str(folder)),
         problems=f"<section class='problems'><h2>Left out</h2><ul>{problems}</ul></section>" if problems else "",
         sections="\n".join(sections),
     )
@@ -168,7 +175,7 @@ def _frames_section(page: _Page, pipeline: dict[str, Any] | None) -> str:
         if seq is not None:
             sequences[name] = seq
     if not sequences:
-        return f"<section>{heading}<p class='dim'>no readable sequence under {_e(page.rel(images))}</p></section>"
+        return f"<section>{heading}<p class='dim'>no readable sequence under {esc(page.rel(images))}</p></section>"
     first = next(iter(sequences.values()))
     moment = float(first.timestamps[len(first) // 2])
     figures = []
@@ -188,8 +195,8 @@ def _frames_section(page: _Page, pipeline: dict[str, Any] | None) -> str:
         module = (recorded.get(name) or {}).get("module")
         caption = "clean sequence" if name == CLEAN and module is None else _module_text(module)
         figures.append(
-            f"<figure style='width: {thumb.shape[1]}px'><img src='{_src(target, page.out_dir)}' width='{thumb.shape[1]}' height='{thumb.shape[0]}' alt='{_e(name)} at t={seq.timestamps[at]:.2f} s'>"
-            f"<figcaption><b>{_e(name)}</b><br><span class='dim'>{_e(caption)}</span></figcaption></figure>"
+            f"<figure style='width: {thumb.shape[1]}px'><img src='{asset_src(target, page.out_dir)}' width='{thumb.shape[1]}' height='{thumb.shape[0]}' alt='{esc(name)} at t={seq.timestamps[at]:.2f} s'>"
+            f"<figcaption><b>{esc(name)}</b><br><span class='dim'>{esc(caption)}</span></figcaption></figure>"
         )
     return f"<section>{heading}<p class='dim'>the same moment, t = {moment:.2f} s, in every sequence</p><div class='gallery frames'>{''.join(figures)}</div></section>"
 
@@ -244,11 +251,11 @@ def _slam_section(page: _Page) -> str:
         return f"<section>{heading}<p class='dim'>no SLAM runs: run <code>sal evaluate CONFIG --slam NAME</code></p></section>"
     parts = [heading]
     for system in systems:
-        parts.append(f"<h3>{_e(system.name)}</h3>")
+        parts.append(f"<h3>{esc(system.name)}</h3>")
         path = system / "metrics" / "summary.json"
         summary = page.json(path) if path.is_file() else None
         if summary is None:
-            parts.append(f"<p class='dim'>{'unreadable' if path.is_file() else 'missing'}: {_e(page.rel(path))}</p>")
+            parts.append(f"<p class='dim'>{'unreadable' if path.is_file() else 'missing'}: {esc(page.rel(path))}</p>")
             continue
         parts.append(_slam_table(summary))
         parts.append(page.picture(system / "metrics" / "aggregated_metrics.png", f"slam/{system.name}/aggregated_metrics.png", f"{system.name}: metrics over runs"))
@@ -265,7 +272,7 @@ def _slam_table(summary: dict[str, Any]) -> str:
     order = summary.get("order") or [CLEAN, *(summary.get("perturbations") or {})]
     units = {key: METRICS[key].unit if key != "tracking_rate" else "" for key, _, _ in SLAM_COLUMNS}
     head = "<th>sequence</th><th class='num'>runs ok</th>" + "".join(
-        f"<th class='num'>{_e(h)}{f' [{units[key]}]' if units[key] else ''} median</th>" for key, h, _ in SLAM_COLUMNS
+        f"<th class='num'>{esc(h)}{f' [{units[key]}]' if units[key] else ''} median</th>" for key, h, _ in SLAM_COLUMNS
     ) + "<th class='num'>ATE min .. max [m]</th>"
     rows, failures = [], []
     for name in order:
@@ -273,16 +280,16 @@ def _slam_table(summary: dict[str, Any]) -> str:
         if not isinstance(entry, dict):
             continue
         runs, failed = int(entry.get("runs", 0)), int(entry.get("failures", 0))
-        cells = [f"<td>{_e(name)}</td>", f"<td class='num'>{runs - failed}/{runs}</td>"]
+        cells = [f"<td>{esc(name)}</td>", f"<td class='num'>{runs - failed}/{runs}</td>"]
         for key, _, spec in SLAM_COLUMNS:
-            cells.append(f"<td class='num'>{_e(_stat(entry.get(key), 'median', spec))}</td>")
+            cells.append(f"<td class='num'>{esc(_stat(entry.get(key), 'median', spec))}</td>")
         ate = entry.get("ate_rmse")
-        cells.append(f"<td class='num'>{_e(_stat(ate, 'min', '.4f'))} .. {_e(_stat(ate, 'max', '.4f'))}</td>")
+        cells.append(f"<td class='num'>{esc(_stat(ate, 'min', '.4f'))} .. {esc(_stat(ate, 'max', '.4f'))}</td>")
         failures += [f"{name}, run {r.get('run')}: {r.get('reason')}" if isinstance(r, dict) else f"{name}: {r}" for r in entry.get("failure_reasons") or []]
         rows.append(f"<tr class='{'failed' if entry.get('failures') else 'passed'}'>{''.join(cells)}</tr>")
     runs = summary.get("run_count", "?")
-    listed = f"<ul class='failures'>{''.join(f'<li>{_e(f)}</li>' for f in failures)}</ul>" if failures else ""
-    return (f"<p class='dim'>{_e(summary.get('sequence', ''))}, {_e(summary.get('frames', '?'))} frames, {_e(runs)} run(s) per sequence</p>"
+    listed = f"<ul class='failures'>{''.join(f'<li>{esc(f)}</li>' for f in failures)}</ul>" if failures else ""
+    return (f"<p class='dim'>{esc(summary.get('sequence', ''))}, {esc(summary.get('frames', '?'))} frames, {esc(runs)} run(s) per sequence</p>"
             f"<table class='slam'><thead><tr>{head}</tr></thead><tbody>{''.join(rows)}</tbody></table>{listed}")
 
 
@@ -290,28 +297,24 @@ def _slam_table(summary: dict[str, Any]) -> str:
 
 
 def _boundary_section(page: _Page) -> str:
-    root = page.folder / "robustness_boundary"
     heading = "<h2>Robustness boundary</h2>"
-    summaries = sorted(root.glob("*/*/boundary_summary.json")) if root.is_dir() else []
-    if not summaries:
+    summaries = page.summaries("robustness_boundary", "*/*/boundary_summary.json")
+    if summaries is None:
         return f"<section>{heading}<p class='dim'>no boundary search: run <code>sal boundary CONFIG --slam NAME</code></p></section>"
     parts = [heading]
-    for path in summaries:
-        s = page.json(path)
-        if s is None:
-            continue
+    for path, s in summaries:
         unit = s.get("unit") or ""
         system, name = path.parent.parent.name, path.parent.name
         verdict = "passed" if s.get("edge_verdict") == "passed" else "failed"
         facts = [
-            ("requirement", f"<code>{_e(s.get('requirement', '?'))}</code>"),
-            ("boundary", f"{_e(s.get('parameter', '?'))} {_e(s.get('boundary_text', '?'))} <span class='dim'>({_e(s.get('termination', '?'))})</span>"),
-            ("pass / fail value", f"{_e(_value(s.get('pass_value')))} / {_e(_value(s.get('fail_value')))} {_e(unit)}"),
-            ("trials", f"{_e(s.get('trials_used', len(s.get('trials') or [])))} (a linear sweep at the tolerance step: {_e(s.get('linear_sweep_trials', '?'))})"),
-            ("dataset", _e(s.get("dataset", "?"))),
+            ("requirement", f"<code>{esc(s.get('requirement', '?'))}</code>"),
+            ("boundary", f"{esc(s.get('parameter', '?'))} {esc(s.get('boundary_text', '?'))} <span class='dim'>({esc(s.get('termination', '?'))})</span>"),
+            ("pass / fail value", f"{esc(_value(s.get('pass_value')))} / {esc(_value(s.get('fail_value')))} {esc(unit)}"),
+            ("trials", f"{esc(s.get('trials_used', len(s.get('trials') or [])))} (a linear sweep at the tolerance step: {esc(s.get('linear_sweep_trials', '?'))})"),
+            ("dataset", esc(s.get("dataset", "?"))),
         ]
-        parts.append(f"<h3><span class='badge {verdict}'>{verdict}</span> {_e(name)} <span class='dim'>({_e(system)})</span></h3>")
-        parts.append("<dl>" + "".join(f"<dt>{_e(k)}</dt><dd>{v}</dd>" for k, v in facts) + "</dl>")
+        parts.append(f"<h3><span class='badge {verdict}'>{verdict}</span> {esc(name)} <span class='dim'>({esc(system)})</span></h3>")
+        parts.append("<dl>" + "".join(f"<dt>{esc(k)}</dt><dd>{v}</dd>" for k, v in facts) + "</dl>")
         parts.append(page.picture(path.parent / "boundary_plot.png", f"boundary/{system}/{name}.png", f"{s.get('parameter')} against the metrics"))
         parts.append(_trials_table(s.get("trials") or [], unit))
     return "<section>" + "\n".join(parts) + "</section>"
@@ -326,27 +329,23 @@ def _trials_table(trials: list[Any], unit: str) -> str:
         cells = [str(i + 1), _value(t.get("value")), str(t.get("verdict", "?")), _fmt(m.get("ate_rmse"), ".4f"), _fmt(m.get("tracking_rate"), ".0%"), ", ".join(notes), failed]
         numeric = {0, 1, 3, 4}
         rows.append(f"<tr class='{'passed' if t.get('verdict') == 'pass' else 'failed'}'>"
-                    + "".join(f"<td{' class=num' if j in numeric else ''}>{_e(c)}</td>" for j, c in enumerate(cells)) + "</tr>")
+                    + "".join(f"<td{' class=num' if j in numeric else ''}>{esc(c)}</td>" for j, c in enumerate(cells)) + "</tr>")
     head = ["#", f"value [{unit}]" if unit else "value", "verdict", "ATE [m]", "tracked", "", "failed criteria"]
-    return "<table class='trials'><thead><tr>" + "".join(f"<th>{_e(h)}</th>" for h in head) + f"</tr></thead><tbody>{''.join(rows)}</tbody></table>"
+    return "<table class='trials'><thead><tr>" + "".join(f"<th>{esc(h)}</th>" for h in head) + f"</tr></thead><tbody>{''.join(rows)}</tbody></table>"
 
 
 # ---------------------------------------------------------------- feature tracking
 
 
 def _features_section(page: _Page) -> str:
-    root = page.folder / "features"
     heading = "<h2>Feature tracking</h2>"
-    summaries = sorted(root.glob("*/summary.json")) if root.is_dir() else []
-    if not summaries:
+    summaries = page.summaries("features", "*/summary.json")
+    if summaries is None:
         return f"<section>{heading}<p class='dim'>no feature tracking: run <code>sal features CONFIG --features orb</code></p></section>"
     parts = [heading]
-    for path in summaries:
-        s = page.json(path)
-        if s is None:
-            continue
+    for path, s in summaries:
         feature = path.parent.name
-        parts.append(f"<h3>{_e(feature)} <span class='dim'>{_e(s.get('extractor', ''))}</span></h3>")
+        parts.append(f"<h3>{esc(feature)} <span class='dim'>{esc(s.get('extractor', ''))}</span></h3>")
         head = "".join(f"<th{' class=num' if i else ''}>{h}</th>" for i, h in enumerate(("sequence", "detections / frame", "matches / frame", "match ratio", "mean track length", "longest track")))
         rows = []
         for name, st in (s.get("sequences") or {}).items():
@@ -354,7 +353,7 @@ def _features_section(page: _Page) -> str:
                 continue
             cells = [name, _stat(st.get("detections_per_frame"), "mean", ".0f"), _stat(st.get("matches_per_frame"), "mean", ".0f"),
                      _stat(st.get("match_ratio"), "mean", ".1%"), _fmt(st.get("mean_track_length"), ".2f"), _value(st.get("max_track_length"))]
-            rows.append("<tr>" + "".join(f"<td{' class=num' if i else ''}>{_e(c)}</td>" for i, c in enumerate(cells)) + "</tr>")
+            rows.append("<tr>" + "".join(f"<td{' class=num' if i else ''}>{esc(c)}</td>" for i, c in enumerate(cells)) + "</tr>")
         parts.append(f"<table class='features'><thead><tr>{head}</tr></thead><tbody>{''.join(rows)}</tbody></table>")
         survival = page.picture(path.parent / "track_survival.png", f"features/{feature}/track_survival.png", f"{feature}: track survival", "half")
         detections = page.picture(path.parent / "detections.png", f"features/{feature}/detections.png", f"{feature}: detections and matches per frame", "half")
@@ -383,14 +382,6 @@ def _value(value: Any) -> str:
 
 def _file_stem(name: str) -> str:
     return "".join(c if c.isalnum() or c in "._-" else "_" for c in name) or "sequence"
-
-
-def _src(path: Path, directory: Path) -> str:
-    return _e(quote(path.relative_to(directory).as_posix()))
-
-
-def _e(text: object) -> str:
-    return html.escape(str(text), quote=True)
 
 
 _PAGE = """<!DOCTYPE html>

@@ -45,7 +45,7 @@ from pytest_sal.report import (
 )
 from pytest_sal.requirements import METRICS
 
-__all__ = ["REPORT_CSS", "metric_figure", "metric_plot", "write_html_report"]
+__all__ = ["REPORT_CSS", "asset_src", "esc", "metric_figure", "metric_plot", "write_html_report"]
 
 PASS_COLOUR = "#2ca02c"
 FAIL_COLOUR = "#d62728"
@@ -210,24 +210,24 @@ def write_html_report(outcomes: Iterable[Outcome], directory: str | Path, *, tit
     slugs = _slugs(outcomes)
     sections = [_section(o, slug, directory) for o, slug in zip(outcomes, slugs)]
     rows = summary_rows(outcomes)
-    head = "".join(f"<th{_num_cls(align == '>')}>{_e(h)}</th>" for _, h, align in COLUMNS)
+    head = "".join(f"<th{_num_cls(align == '>')}>{esc(h)}</th>" for _, h, align in COLUMNS)
     body = []
     for row, slug in zip(rows, slugs):
         cells = []
         for key, _, align in COLUMNS:
-            text = _e(row[key])
+            text = esc(row[key])
             if key == "test":
-                text = f"<a href='#{slug}' title='{_e(row['test_id'])}'>{text}</a>"
+                text = f"<a href='#{slug}' title='{esc(row['test_id'])}'>{text}</a>"
             elif key == "verdict":
                 text = _badge(row["status"])
             cells.append(f"<td{_num_cls(align == '>')}>{text}</td>")
         body.append(f"<tr class='{row['status']}'>{''.join(cells)}</tr>")
     where = sorted({" on ".join(x for x in (o.commit, o.machine) if x) for o in outcomes if o.commit or o.machine})
     page = _PAGE.format(
-        title=_e(title),
+        title=esc(title),
         css=REPORT_CSS,
-        headline=_e(headline(outcomes)),
-        where=f"<p class='where'>{_e(', '.join(where))}</p>" if where else "",
+        headline=esc(headline(outcomes)),
+        where=f"<p class='where'>{esc(', '.join(where))}</p>" if where else "",
         head=head,
         rows="\n".join(body),
         sections="\n".join(sections),
@@ -239,33 +239,33 @@ def _section(o: Outcome, slug: str, directory: Path) -> str:
     assets = directory / "assets" / slug
     unit = o.boundary.unit
     facts = [
-        ("requirement", f"<code>{_e(o.requirement)}</code>"),
-        ("system", _e(o.system)),
-        ("dataset", _e(o.dataset)),
-        ("boundary", f"{_e(o.boundary.text())} <span class='dim'>({_e(o.termination)})</span>"),
-        ("margin", _e(signed(o.margin, unit))),
+        ("requirement", f"<code>{esc(o.requirement)}</code>"),
+        ("system", esc(o.system)),
+        ("dataset", esc(o.dataset)),
+        ("boundary", f"{esc(o.boundary.text())} <span class='dim'>({esc(o.termination)})</span>"),
+        ("margin", esc(signed(o.margin, unit))),
     ]
     if o.previous is not None:
-        facts.append(("previous", f"{_e(o.previous.text())} <span class='dim'>(change {_e(change_cell(o))})</span>"))
+        facts.append(("previous", f"{esc(o.previous.text())} <span class='dim'>(change {esc(change_cell(o))})</span>"))
     if o.regression:
-        facts.append(("regression", f"<span class='bad'>{_e(o.regression)}</span>"))
+        facts.append(("regression", f"<span class='bad'>{esc(o.regression)}</span>"))
     for label, trial in zip(("last pass", "first fail"), bracket_trials(o)):
         if trial is not None:
             metrics = ", ".join(f"{n} {metric_text(n, trial.metrics.get(n))}" for n in trial_metric_names(o))
-            facts.append((label, f"{_e(with_unit(trial.value, unit))}: {_e(metrics)}"))
+            facts.append((label, f"{esc(with_unit(trial.value, unit))}: {esc(metrics)}"))
     if o.reproduction:
-        facts.append(("reproduce", f"<code>{_e(o.reproduction)}</code>"))
+        facts.append(("reproduce", f"<code>{esc(o.reproduction)}</code>"))
     parts = [
         f"<section id='{slug}' class='test {status(o)}'>",
-        f"<h2>{_badge(status(o))} <span class='id'>{_e(o.test_id)}</span></h2>",
-        "<dl>" + "".join(f"<dt>{_e(k)}</dt><dd>{v}</dd>" for k, v in facts) + "</dl>",
+        f"<h2>{_badge(status(o))} <span class='id'>{esc(o.test_id)}</span></h2>",
+        "<dl>" + "".join(f"<dt>{esc(k)}</dt><dd>{v}</dd>" for k, v in facts) + "</dl>",
     ]
     if o.trials:
         plot = metric_plot(o, assets / "metrics.png")
-        parts.append(f"<img class='plot' src='{_src(plot, directory)}' alt='{_e(o.parameter)} against the metrics' width='800' height='600'>")
+        parts.append(f"<img class='plot' src='{asset_src(plot, directory)}' alt='{esc(o.parameter)} against the metrics' width='800' height='600'>")
         parts.append(_trials_table(o))
     if o.contradictions:
-        items = "".join(f"<li>{_e(c)}</li>" for c in o.contradictions)
+        items = "".join(f"<li>{esc(c)}</li>" for c in o.contradictions)
         parts.append(f"<h3>Contradictions</h3><p class='dim'>a pass more severe than a fail</p><ul>{items}</ul>")
     for kind, heading in (("frame", "Example frames"), ("trajectory", "Trajectories")):
         figures = _artifact_figures(o, kind, assets, directory)
@@ -285,9 +285,9 @@ def _trials_table(o: Outcome) -> str:
         verdict = ("pass" if t.passed else "fail") + (" (repeat)" if t.repeat else "")
         cells = [str(i), num(t.value), verdict, *(metric_text(n, t.metrics.get(n)) for n in names)]
         cells += ["yes" if t.cached else "", f"{t.wall_time_s:.1f} s", "; ".join(t.failed)]
-        tds = "".join(f"<td{_num_cls(j in num_cols)}>{_e(c)}</td>" for j, c in enumerate(cells))
+        tds = "".join(f"<td{_num_cls(j in num_cols)}>{esc(c)}</td>" for j, c in enumerate(cells))
         rows.append(f"<tr class='{'passed' if t.passed else 'failed'}'>{tds}</tr>")
-    ths = "".join(f"<th{_num_cls(j in num_cols)}>{_e(h)}</th>" for j, h in enumerate(head))
+    ths = "".join(f"<th{_num_cls(j in num_cols)}>{esc(h)}</th>" for j, h in enumerate(head))
     return f"<table class='trials'><thead><tr>{ths}</tr></thead><tbody>{''.join(rows)}</tbody></table>"
 
 
@@ -307,16 +307,16 @@ def _artifact_figures(o: Outcome, kind: str, assets: Path, directory: Path) -> l
         cls = "passed" if t.passed else "failed"
         src = Path(source)
         if not src.is_file():
-            figures.append(f"<figure class='{cls} missing'><div class='none'>missing: {_e(src.name)}</div><figcaption>{_e(caption)}</figcaption></figure>")
+            figures.append(f"<figure class='{cls} missing'><div class='none'>missing: {esc(src.name)}</div><figcaption>{esc(caption)}</figcaption></figure>")
             continue
         target = assets / f"{kind}-{index + 1:02d}{src.suffix.lower() or '.png'}"
         target.parent.mkdir(parents=True, exist_ok=True)
         if src.resolve() != target.resolve():
             shutil.copyfile(src, target)
-        rel = _src(target, directory)
+        rel = asset_src(target, directory)
         figures.append(
-            f"<figure class='{cls}'><a href='{rel}'><img src='{rel}' alt='{_e(kind)} at {_e(caption)}' loading='lazy'></a>"
-            f"<figcaption>{_e(caption)}</figcaption></figure>"
+            f"<figure class='{cls}'><a href='{rel}'><img src='{rel}' alt='{esc(kind)} at {esc(caption)}' loading='lazy'></a>"
+            f"<figcaption>{esc(caption)}</figcaption></figure>"
         )
     return figures
 
@@ -331,11 +331,13 @@ def _slugs(outcomes: Sequence[Outcome]) -> list[str]:
     return slugs
 
 
-def _src(path: Path, directory: Path) -> str:
-    return _e(quote(path.relative_to(directory).as_posix()))
+def asset_src(path: Path, directory: Path) -> str:
+    """``path`` relative to the page's ``directory``, URL-quoted and escaped for an attribute."""
+    return esc(quote(path.relative_to(directory).as_posix()))
 
 
-def _e(text: object) -> str:
+def esc(text: object) -> str:
+    """``text`` escaped for HTML text and attribute values."""
     return html.escape(str(text), quote=True)
 
 
@@ -344,7 +346,7 @@ def _num_cls(numeric: bool) -> str:
 
 
 def _badge(state: str) -> str:
-    return f"<span class='badge {_e(state)}'>{_e(state)}</span>"
+    return f"<span class='badge {esc(state)}'>{esc(state)}</span>"
 
 
 _PAGE = """<!DOCTYPE html>
