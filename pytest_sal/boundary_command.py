@@ -24,7 +24,11 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
-from pytest_sal.cli_types import add_slam_arguments, parse_key_values
+from pytest_sal.cli_types import (
+    add_cache_arguments,
+    add_slam_arguments,
+    parse_key_values,
+)
 from sal_adapters import SalError
 
 if TYPE_CHECKING:
@@ -65,8 +69,7 @@ def add_boundary_commands(commands: argparse._SubParsersAction) -> None:
     )
     cmd.add_argument("config", type=Path, metavar="CONFIG", help="experiment YAML with an enabled robustness_boundary block")
     add_slam_arguments(cmd, "runs per trial; metrics are their median")
-    cmd.add_argument("--cache-dir", type=Path, metavar="DIR", help="trial cache (default: .sal/cache)")
-    cmd.add_argument("--no-cache", action="store_true", help="run every trial, read and store nothing in the cache")
+    add_cache_arguments(cmd, "trial cache", no_cache="run every trial, read and store nothing in the cache")
     cmd.set_defaults(run=_run)
 
 
@@ -123,7 +126,7 @@ def run_boundary(
 ) -> dict[str, Any]:
     """Run the boundary search of the config's ``robustness_boundary`` block with the SLAM
     system ``slam``; write and return ``boundary_summary.json``'s content."""
-    from pytest_sal.cache import ContentCache, default_cache_dir
+    from pytest_sal.cache import command_cache
     from pytest_sal.experiment import (
         ConfigError,
         build_module,
@@ -158,7 +161,7 @@ def run_boundary(
     )
     clean = build_sequence(config)
     folder = config.output_dir() / "robustness_boundary" / system.name / rb.name
-    cache = ContentCache(cache_dir if cache_dir is not None else default_cache_dir()) if use_cache else None
+    cache = command_cache(cache_dir) if use_cache else None
     runner = TrialRunner(
         clean, ref, system, requirement, runs=runs, seed=config.experiment.seed, cache=cache, workdir=folder / "runs", timeout=timeout
     )

@@ -53,6 +53,7 @@ __all__ = [
     "ContentCache",
     "cache_key",
     "canonical_json",
+    "command_cache",
     "default_cache_dir",
     "parse_size",
 ]
@@ -163,6 +164,11 @@ for _power, _letter in enumerate("kmgt", start=1):
     _UNITS[_letter] = _UNITS[_letter + "b"] = 1000**_power
     _UNITS[_letter + "i"] = _UNITS[_letter + "ib"] = 1024**_power
 _SIZE = re.compile(r"\s*(\d+(?:\.\d*)?|\.\d+)\s*([a-z]*)\s*", re.IGNORECASE)
+
+
+def command_cache(cache_dir: str | os.PathLike[str] | None = None) -> ContentCache:
+    """The cache a ``sal`` command uses: ``--cache-dir``, else ``./.sal/cache``."""
+    return ContentCache(cache_dir if cache_dir is not None else default_cache_dir())
 
 
 def parse_size(text: str | int) -> int:

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
 from typing import Any
 
 from sal_adapters import SalError
 
-__all__ = ["add_slam_arguments", "positive_int", "parse_key_values"]
+__all__ = ["add_cache_arguments", "add_slam_arguments", "parse_key_values", "positive_int"]
 
 
 def positive_int(text: str) -> int:
@@ -45,3 +46,11 @@ def add_slam_arguments(command: argparse.ArgumentParser, runs_help: str) -> None
     )
     command.add_argument("--runs", type=positive_int, default=1, metavar="N", help=runs_help + " (default: %(default)s)")
     command.add_argument("--timeout", type=float, default=600.0, metavar="S", help="seconds per SLAM run before it is killed (default: %(default)s)")
+
+
+def add_cache_arguments(command: argparse.ArgumentParser, holds: str, no_cache: str | None = None) -> None:
+    """``--cache-dir DIR`` (``holds``: what the cache keeps there) and, with ``no_cache`` (its
+    help), ``--no-cache``."""
+    command.add_argument("--cache-dir", type=Path, metavar="DIR", help=f"{holds} (default: .sal/cache)")
+    if no_cache is not None:
+        command.add_argument("--no-cache", action="store_true", help=no_cache)

@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from pytest_sal.cli_types import add_slam_arguments
+from pytest_sal.cli_types import add_cache_arguments, add_slam_arguments
 from pytest_sal.experiment import BASELINE
 from sal_adapters.errors import SalError
 from sal_adapters.textfiles import atomic_write
@@ -72,8 +72,7 @@ def add_evaluate_commands(commands: argparse._SubParsersAction) -> None:
     )
     cmd.add_argument("config", type=Path, metavar="CONFIG", help="experiment YAML")
     add_slam_arguments(cmd, "runs per sequence")
-    cmd.add_argument("--cache-dir", type=Path, metavar="DIR", help="content cache of perturbed frames (default: .sal/cache)")
-    cmd.add_argument("--no-cache", action="store_true", help="perturb in memory; read and store nothing in the cache")
+    add_cache_arguments(cmd, "content cache of perturbed frames", no_cache="perturb in memory; read and store nothing in the cache")
     cmd.set_defaults(run=_run)
 
 
@@ -100,7 +99,7 @@ def run_evaluate(
 ) -> dict[str, Any]:
     """Run, score and write everything (see the module docstring); return the summary dict
     (also in ``metrics/summary.json``) with ``root`` (the results folder) added."""
-    from pytest_sal.cache import ContentCache, default_cache_dir
+    from pytest_sal.cache import command_cache
     from pytest_sal.experiment import build_sequence, load_config, perturbed_sequences
     from pytest_sal.trials import cached_sequence
     from sal_wrappers import create
@@ -111,7 +110,7 @@ def run_evaluate(
     groundtruth = clean.groundtruth
     sequences = perturbed_sequences(config, clean)
     if use_cache:
-        cache = ContentCache(cache_dir if cache_dir is not None else default_cache_dir())
+        cache = command_cache(cache_dir)
         sequences = {name: seq if seq is clean else cached_sequence(seq, cache, progress=True) for name, seq in sequences.items()}
     root = config.output_dir() / "slam_results" / slam
     metrics_dir = root / "metrics"

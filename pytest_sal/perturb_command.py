@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from pytest_sal.cli_types import add_cache_arguments
 from pytest_sal.experiment import (
     BoundaryConfig,
     ConfigError,
@@ -67,7 +68,7 @@ def run_perturb(config: ExperimentConfig, *, dry_run: bool = False, cache_dir: P
     ``pipeline_results.json`` (or the plan)."""
     import sys
 
-    from pytest_sal.cache import ContentCache, cache_key, default_cache_dir
+    from pytest_sal.cache import cache_key, command_cache
 
     out = out or sys.stdout
     clean = build_sequence(config)
@@ -100,7 +101,7 @@ def run_perturb(config: ExperimentConfig, *, dry_run: bool = False, cache_dir: P
         target = images / name
         if target.exists() and (not target.is_dir() or (any(target.iterdir()) and not (target / WRITTEN_MARKER).is_file())):
             raise ConfigError(config.source, "output.base_dir", f"{target} exists and was not written by sal perturb; move it or choose another base_dir")
-    cache = ContentCache(cache_dir if cache_dir is not None else default_cache_dir())
+    cache = command_cache(cache_dir)
     results: dict[str, Any] = {
         "experiment": config.experiment.name,
         "seed": seed,
@@ -180,7 +181,7 @@ def add_experiment_commands(commands: argparse._SubParsersAction) -> None:
     )
     cmd.add_argument("config", type=Path, metavar="CONFIG", help="experiment YAML")
     cmd.add_argument("--dry-run", action="store_true", help="validate and print the plan; write nothing")
-    cmd.add_argument("--cache-dir", type=Path, metavar="DIR", help="content cache (default: .sal/cache)")
+    add_cache_arguments(cmd, "content cache of perturbed sequences")
     cmd.set_defaults(run=_run_perturb)
 
 
