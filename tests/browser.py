@@ -35,12 +35,9 @@ def screenshot(page: Path, workdir: Path, size: tuple[int, int] = (1280, 6000)) 
     return image
 
 
-def find_picture(screen: np.ndarray, picture: Path, shown_width: int | None = None) -> tuple[float, int]:
-    """Best normalised-correlation score of ``picture`` (scaled to ``shown_width`` px, its CSS
-    width, when given) anywhere in ``screen``, and the top row where it is."""
+def find_picture(screen: np.ndarray, picture: Path) -> tuple[float, int]:
+    """Best normalised-correlation score of ``picture``, drawn at its natural size, anywhere in
+    ``screen``, and the top row where it is."""
     template = cv2.imread(str(picture), cv2.IMREAD_GRAYSCALE)
-    if shown_width is not None and shown_width != template.shape[1]:
-        height = round(template.shape[0] * shown_width / template.shape[1])
-        template = cv2.resize(template, (shown_width, height), interpolation=cv2.INTER_AREA)
     _, best, _, (_, y) = cv2.minMaxLoc(cv2.matchTemplate(screen, template, cv2.TM_CCOEFF_NORMED))
     return float(best), int(y)
