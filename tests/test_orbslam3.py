@@ -6,7 +6,11 @@ k=10 L=6 vocabulary, 2000 features, paced at the sensor rate), 4 runs per config
 while other jobs kept the load at 5-6 (quiet-machine times in brackets where measured):
 
 * synthetic urban, stereo, 100 frames at 10 Hz (98 m path): 100/100 OK, SE(3) ATE
-  0.023-0.046 m (final trajectory 0.022-0.043 m), 58-170 ms/frame, 16-27 s wall;
+  0.023-0.046 m (final trajectory 0.022-0.043 m), 58-170 ms/frame, 16-27 s wall. The run is
+  multi-threaded and paced in real time, so its ATE varies from run to run and grows with
+  the load: 21 more runs gave 0.016-0.059 m (8 of them beside a CPU-bound process: 0.027-0.059 m),
+  and two CI runs got 0.051 and 0.052 m. The bound is 0.10 m: a 2 % error in the settings'
+  baseline or focal length gives 0.55 m or 0.54 m, so it still catches a wrong calibration;
 * synthetic indoor, RGB-D, 100 frames at 30 Hz (1.1 m path): 100/100 OK, SE(3) ATE
   0.008-0.010 m (final 0.005 m), 70-130 ms/frame, 11-22 s wall;
 * KITTI 07 excerpt, mono, 140 frames at 9.6 Hz (78 m): 136/140 OK in every run (first at
@@ -338,6 +342,11 @@ def euroc_stereo(vocabulary: Path, shared_data: Path, tmp_path_factory: pytest.T
     return _run(vocabulary, sequence, tmp_path_factory.mktemp("orb-euroc")), sequence
 
 
+#: SE(3) ATE bound (m) of the urban stereo run: above its run-to-run spread (up to 0.059 m
+#: measured), below what a 2 % calibration error gives (0.54-0.55 m); see the module docstring.
+URBAN_ATE_BOUND_M = 0.10
+
+
 def _report(result: RunResult, error: float | None = None) -> str:
     text = f"{result.summary()}; {ms_per_frame(result):.0f} ms/frame"
     return text + (f"; ATE {error:.4f} m" if error is not None else "")
@@ -350,7 +359,7 @@ def test_orbslam3_real_stereo_synthetic_urban(urban_stereo: tuple[RunResult, obj
     assert result.tracking_rate > 0.95, _report(result)
     error, matched = ate(result.trajectory, sequence.groundtruth, sim3=False)
     assert matched == result.tracked
-    assert error < 0.05, _report(result, error)  # measured 0.023-0.046 m over a 98 m path
+    assert error < URBAN_ATE_BOUND_M, _report(result, error)  # measured 0.016-0.059 m over a 98 m path
 
 
 def test_orbslam3_real_stereo_synthetic_urban_result_fields(urban_stereo: tuple[RunResult, object]) -> None:
@@ -359,7 +368,7 @@ def test_orbslam3_real_stereo_synthetic_urban_result_fields(urban_stereo: tuple[
     np.testing.assert_array_equal(result.timestamps, sequence.timestamps)
     assert result.final_trajectory is not None and len(result.final_trajectory) >= result.tracked - 1
     assert set(result.final_trajectory.timestamps) <= set(sequence.timestamps)  # put on frame times
-    assert ate(result.final_trajectory, sequence.groundtruth, sim3=False)[0] < 0.05
+    assert ate(result.final_trajectory, sequence.groundtruth, sim3=False)[0] < URBAN_ATE_BOUND_M
     assert result.wall_time_s >= 0.99 * (len(sequence) - 1) / sequence.fps  # paced at 10 Hz: >= 9.8 s
     info = result.info
     assert info["settings_generated"] and Path(info["settings"]).is_file()
