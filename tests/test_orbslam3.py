@@ -377,6 +377,20 @@ def test_orbslam3_real_stereo_synthetic_urban_result_fields(urban_stereo: tuple[
     assert result.log_path.is_file() and "Vocabulary loaded" in result.log_path.read_text()
     RunResult.from_json(result.to_json())
 
+def test_orbslam3_real_stereo_wrong_baseline_breaks_the_bound(
+    urban_stereo: tuple[RunResult, object], vocabulary: Path, tmp_path: Path
+) -> None:
+    """The urban bound can fail: settings with a 2 % too long baseline scale the map by 2 %."""
+    _, sequence = urban_stereo
+    T_left_right = sequence.camera.T_lr.copy()
+    T_left_right[:3, 3] *= 1.02
+    settings = write_settings(tmp_path / "wrong_baseline.yaml", sequence.camera.with_stereo(T_left_right), "stereo", 10.0)
+    result = _run(vocabulary, sequence, tmp_path, settings=settings)
+    assert result.ok, result.failure + "\n" + result.log_tail
+    error, _ = ate(result.trajectory, sequence.groundtruth, sim3=False)
+    assert error > 2 * URBAN_ATE_BOUND_M, _report(result, error)  # measured 0.55 m
+
+
 
 def test_orbslam3_real_rgbd_synthetic_indoor(indoor_rgbd: tuple[RunResult, object]) -> None:
     result, sequence = indoor_rgbd
