@@ -289,7 +289,7 @@ class Precipitation(Perturbation):
         # occlusion by the scene: the sample's pixel has a surface nearer than the particle
         pu = np.clip(np.rint(su), 0, w - 1).astype(np.int64)
         pv = np.clip(np.rint(sv), 0, h - 1).astype(np.int64)
-        surface = depth[pv, pu]
+        surface = depth.ravel().take(pv * w + pu)
         seen = z[owner] <= np.where(surface > 0, surface, self.sky_distance_m)
         owner, su, sv = owner[seen], su[seen], sv[seen]
         weight = (ink * scale * scale / count)[owner]
@@ -298,26 +298,35 @@ class Precipitation(Perturbation):
 
     @staticmethod
     def _splat(u: np.ndarray, v: np.ndarray, weight: np.ndarray, level: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-        """Coverage density (float32 HxW): bilinear splats into pyramid levels, blurred, summed."""
+        """Coverage density (float32 HxW): bilinear splats into pyramid levels, blurred, summed.
+
+        Each level is stored with a one-pixel border, so the four corners of a splat are
+        ``i, i + 1, i + W, i + W + 1`` without bounds tests; the border is dropped afterwards."""
         h, w = shape
         sizes = [(int(np.ceil(h / 2**k)), int(np.ceil(w / 2**k))) for k in range(LEVELS)]
-        offsets = np.cumsum([0] + [a * b for a, b in sizes])
+        padded = np.array([(a + 2) * (b + 2) for a, b in sizes])
+        offsets = np.concatenate([[0], np.cumsum(padded)])
         lh = np.array([s[0] for s in sizes])[level]
         lw = np.array([s[1] for s in sizes])[level]
         x = (u + 0.5) * (lw / w) - 0.5
         y = (v + 0.5) * (lh / h) - 0.5
-        x0, y0 = np.floor(x).astype(np.int64), np.floor(y).astype(np.int64)
+        inside = (x > -1.0) & (x < lw) & (y > -1.0) & (y < lh)
+        x, y, weight, level, lw = x[inside], y[inside], weight[inside], level[inside], lw[inside]
+        x0, y0 = np.floor(x), np.floor(y)
         fx, fy = x - x0, y - y0
-        index, value = [], []
-        for dx, dy, share in ((0, 0, (1 - fx) * (1 - fy)), (1, 0, fx * (1 - fy)), (0, 1, (1 - fx) * fy), (1, 1, fx * fy)):
-            xs, ys = x0 + dx, y0 + dy
-            ok = (xs >= 0) & (xs < lw) & (ys >= 0) & (ys < lh)
-            index.append((offsets[level] + ys * lw + xs)[ok])
-            value.append((weight * share)[ok])
-        flat = np.bincount(np.concatenate(index), np.concatenate(value), minlength=int(offsets[-1])).astype(np.float32)
+        stride = lw + 2
+        first = offsets[level] + (y0.astype(np.int64) + 1) * stride + (x0.astype(np.int64) + 1)
+        index = np.concatenate([first, first + 1, first + stride, first + stride + 1])
+        wx0, wx1 = weight * (1.0 - fx), weight * fx
+        value = np.concatenate([wx0 * (1.0 - fy), wx1 * (1.0 - fy), wx0 * fy, wx1 * fy])
+        flat = scratch("precipitation.splat", (int(offsets[-1]),))
+        flat.fill(0.0)
+        np.add.at(flat, index, value.astype(np.float32))
         total = None
         for k in reversed(range(LEVELS)):
-            layer = cv2.GaussianBlur(flat[offsets[k] : offsets[k + 1]].reshape(sizes[k]), (0, 0), _SIGMA)
-            total = layer if total is None else cv2.add(cv2.resize(total, sizes[k][::-1], interpolation=cv2.INTER_LINEAR), layer)
+            lh_k, lw_k = sizes[k]
+            plane = flat[offsets[k] : offsets[k + 1]].reshape(lh_k + 2, lw_k + 2)[1:-1, 1:-1]
+            layer = cv2.GaussianBlur(plane, (0, 0), _SIGMA)
+            total = layer if total is None else cv2.add(cv2.resize(total, (lw_k, lh_k), interpolation=cv2.INTER_LINEAR), layer)
         assert total is not None
         return total
