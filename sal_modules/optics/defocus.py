@@ -35,6 +35,7 @@ import cv2
 import numpy as np
 
 from sal_modules.base import ModuleContext, Perturbation
+from sal_modules.buffers import scratch
 from sal_modules.errors import ModuleError
 from sal_modules.params import Param
 
@@ -56,7 +57,9 @@ def circle_of_confusion_px(depth_m: np.ndarray, f_number: float, focus_m: float,
     at_infinity_px = focal_mm**2 / (f_number * (s_mm - focal_mm)) / (pitch_um / 1000.0)
     depth = np.asarray(depth_m, np.float32)
     inverse = np.divide(np.float32(1.0), depth, out=np.zeros_like(depth), where=depth > 0)  # 1/d (1/m), 0 = infinity
-    return np.abs(inverse * np.float32(-focus_m) + np.float32(1.0)) * np.float32(at_infinity_px)
+    np.multiply(inverse, np.float32(-focus_m), out=inverse)
+    np.add(inverse, np.float32(1.0), out=inverse)
+    return np.multiply(np.abs(inverse, out=inverse), np.float32(at_infinity_px), out=inverse)
 
 
 @lru_cache(maxsize=32)
@@ -72,19 +75,20 @@ def _blur(layer: np.ndarray, radius: float) -> np.ndarray:
     """``layer`` (HxW float32) convolved with a disk of ``radius`` px (pyramid for big ones)."""
     if radius <= 2.0:
         return cv2.filter2D(layer, -1, disk_kernel(radius), borderType=cv2.BORDER_REFLECT)
-    scale = radius / 2.0
+    factor = int(radius // 2)  # the levels are powers of two: an integer reduction
     height, width = layer.shape[:2]
-    small_size = (max(1, round(width / scale)), max(1, round(height / scale)))
-    small = cv2.resize(layer, small_size, interpolation=cv2.INTER_AREA)
-    small = cv2.filter2D(small, -1, disk_kernel(float(np.sqrt((radius / scale) ** 2 - 1.0))), borderType=cv2.BORDER_REFLECT)
-    return cv2.resize(small, (width, height), interpolation=cv2.INTER_LINEAR)
+    small_h, small_w = -(-height // factor), -(-width // factor)
+    padded = cv2.copyMakeBorder(layer, 0, small_h * factor - height, 0, small_w * factor - width, cv2.BORDER_REFLECT)
+    small = cv2.resize(padded, (small_w, small_h), interpolation=cv2.INTER_AREA)  # exact box means (OpenCV's fast path)
+    small = cv2.filter2D(small, -1, disk_kernel(float(np.sqrt((radius / factor) ** 2 - 1.0))), borderType=cv2.BORDER_REFLECT)
+    return cv2.resize(small, (small_w * factor, small_h * factor), interpolation=cv2.INTER_LINEAR)[:height, :width]
 
 
 class Defocus(Perturbation):
     """Thin-lens defocus blur from depth: circle of confusion, layered disk blur."""
 
     name = "defocus"
-    version = 1
+    version = 2
     summary = "Lens focused at the wrong distance: thin-lens circle of confusion from depth, layered disk blur"
     needs_depth = True
 
@@ -118,7 +122,7 @@ class Defocus(Perturbation):
     def blur_radius_px(self, depth: np.ndarray, stream: str = "left") -> np.ndarray:
         """Blur disk radius (px) per pixel: half the circle of confusion, capped."""
         coc = circle_of_confusion_px(depth, self.f_number, self.focus_distance_m, self.focal_mm(stream), self.pixel_pitch_um)
-        return np.minimum(coc / 2.0, MAX_RADIUS_PX)
+        return np.minimum(np.multiply(coc, np.float32(0.5), out=coc), np.float32(MAX_RADIUS_PX), out=coc)
 
     def apply(self, image: np.ndarray, depth: np.ndarray | None, index: int, stream: str) -> np.ndarray:
         if depth is None:
@@ -140,19 +144,21 @@ def render_layers(image: np.ndarray, radius: np.ndarray, far: np.ndarray) -> np.
     """
     lower, upper = _split_levels(radius)
     top = int(lower.max())
-    colour = np.empty((4, *image.shape[:2]), np.float32)  # planar RGBA
-    for channel, plane in enumerate(cv2.split(image)):
-        colour[channel] = plane
+    height, width = radius.shape
+    colour = scratch("defocus.colour", (4, height, width))  # planar RGBA
+    for channel in range(3):
+        np.copyto(colour[channel], image[..., channel], casting="unsafe")
     colour[3] = 1.0
-    acc = np.zeros_like(colour)
+    acc = scratch("defocus.acc", (4, height, width))
+    acc.fill(0.0)
     near = ~far
     order = [(j, far) for j in range(top, -1, -1)] + ([(j, near) for j in range(top + 1)] if near.any() else [])
     for slab, side in order:
         members = (lower == slab) & side
         if members.any():
             _composite_slab(acc, colour, members, upper, slab)
-    np.maximum(acc[3], 1e-6, out=acc[3])
-    return cv2.merge([cv2.convertScaleAbs(plane / acc[3]) for plane in acc[:3]])
+    coverage = np.maximum(acc[3], 1e-6, out=acc[3])
+    return cv2.merge([cv2.convertScaleAbs(cv2.divide(plane, coverage, dst=plane)) for plane in acc[:3]])
 
 
 def _split_levels(radius: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -162,9 +168,23 @@ def _split_levels(radius: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     lower = np.zeros(radius.shape, np.uint8)
     for level in LEVELS[1:-1]:
         lower += radius >= level
+    base, span = _LEVEL_TABLES
+    table = scratch("defocus.table", radius.shape)
+    share = cv2.multiply(radius, radius, dst=scratch("defocus.upper", radius.shape))
+    cv2.subtract(share, cv2.LUT(lower, base, dst=table), dst=share)
+    cv2.divide(share, cv2.LUT(lower, span, dst=table), dst=share)
+    return lower, np.clip(share, 0.0, 1.0, out=share)
+
+
+def _level_tables() -> tuple[np.ndarray, np.ndarray]:
+    """256-entry tables (cv2.LUT) of rho_j^2 and rho_{j+1}^2 - rho_j^2 by level j."""
     rho2 = np.square(np.asarray(LEVELS, np.float32))
-    base, span = rho2[lower], (rho2[1:] - rho2[:-1])[lower]
-    return lower, np.clip((np.square(radius) - base) / span, 0.0, 1.0)
+    base, span = np.zeros(256, np.float32), np.ones(256, np.float32)
+    base[: TOP + 1], span[:TOP] = rho2, rho2[1:] - rho2[:-1]
+    return base, span
+
+
+_LEVEL_TABLES = _level_tables()
 
 
 def _composite_slab(acc: np.ndarray, colour: np.ndarray, members: np.ndarray, upper: np.ndarray, slab: int) -> None:
@@ -178,15 +198,22 @@ def _composite_slab(acc: np.ndarray, colour: np.ndarray, members: np.ndarray, up
     y0, y1 = max(rows[0] - reach, 0), min(rows[-1] + 1 + reach, height)
     x0, x1 = max(cols[0] - reach, 0), min(cols[-1] + 1 + reach, width)
     box = (slice(y0, y1), slice(x0, x1))
-    share = np.where(members[box], upper[box], np.float32(0.0))
-    layer = colour[(slice(None), *box)] * share
+    box_shape = (y1 - y0, x1 - x0)
+    # work arrays of the full frame, used on the box: one allocation per frame size, not per slab
+    share = scratch("defocus.share", members.shape)[: box_shape[0], : box_shape[1]]
+    remainder = scratch("defocus.remainder", members.shape)[: box_shape[0], : box_shape[1]]
+    layer = scratch("defocus.layer", (4, height, width))[:, : box_shape[0], : box_shape[1]]
+    rest = scratch("defocus.rest", (4, height, width))[:, : box_shape[0], : box_shape[1]]
+    np.multiply(upper[box], members[box], out=share)
+    np.subtract(members[box], share, out=remainder)
+    np.multiply(colour[(slice(None), *box)], share, out=layer)
     for plane in layer:
         plane[...] = _blur(plane, LEVELS[slab + 1])
-    rest = colour[(slice(None), *box)] * (members[box] - share)
+    np.multiply(colour[(slice(None), *box)], remainder, out=rest)
     if slab > 0:
         for plane in rest:
             plane[...] = _blur(plane, LEVELS[slab])
     layer += rest
     window = acc[(slice(None), *box)]
-    window *= 1.0 - layer[3]
+    window *= np.subtract(1.0, layer[3], out=remainder)
     window += layer

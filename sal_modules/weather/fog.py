@@ -39,7 +39,6 @@ median error of tau is about 2 %.
 
 from __future__ import annotations
 
-import threading
 from typing import Any
 
 import cv2
@@ -47,6 +46,7 @@ import numpy as np
 
 from sal_adapters.camera import Camera
 from sal_modules.base import ModuleContext, Perturbation
+from sal_modules.buffers import scratch
 from sal_modules.params import Param
 from sal_modules.weather.noise import GradientNoise
 
@@ -57,7 +57,6 @@ __all__ = [
     "estimate_atmospheric_light",
     "first_frame_airlight",
     "ray_lengths",
-    "scratch",
     "srgb_decode",
     "srgb_to_linear",
 ]
@@ -90,19 +89,6 @@ _ENCODE = np.rint(255.0 * _srgb_encode(np.arange(65536) / 65535.0)).astype(np.ui
 def srgb_to_linear(image: np.ndarray) -> np.ndarray:
     """uint8 sRGB image -> float32 linear radiance in [0, 1] (a 256-entry table)."""
     return cv2.LUT(image, _DECODE)
-
-
-def scratch(name: str, shape: tuple[int, ...], dtype: Any = np.float32) -> np.ndarray:
-    """A work array kept per thread for reuse (contents undefined). Allocating ~20 MB of fresh
-    temporaries per frame costs more in page faults than the arithmetic itself."""
-    arrays = _SCRATCH.__dict__.setdefault("arrays", {})
-    key = (name, tuple(shape), np.dtype(dtype).str)
-    if key not in arrays:
-        arrays[key] = np.empty(shape, dtype)
-    return arrays[key]
-
-
-_SCRATCH = threading.local()
 
 
 def blend_srgb(image: np.ndarray, gain: np.ndarray, terms: list[tuple[np.ndarray, Any]]) -> np.ndarray:

@@ -60,12 +60,12 @@ import cv2
 import numpy as np
 
 from sal_modules.base import ModuleContext, Perturbation
+from sal_modules.buffers import scratch
 from sal_modules.params import Param
 from sal_modules.weather.fog import (
     blend_srgb,
     first_frame_airlight,
     ray_lengths,
-    scratch,
 )
 
 __all__ = ["Particles", "Precipitation"]
