@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from pathlib import Path
 from typing import Any
 
 from sal_adapters import SalError
 
-__all__ = ["add_cache_arguments", "add_slam_arguments", "parse_key_values", "positive_int"]
+__all__ = ["add_cache_arguments", "add_slam_arguments", "parse_key_values", "positive_int", "positive_seconds"]
 
 
 def positive_int(text: str) -> int:
@@ -20,6 +21,17 @@ def positive_int(text: str) -> int:
         raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
     if value < 1:
         raise argparse.ArgumentTypeError(f"expected a number >= 1, got {value}")
+    return value
+
+
+def positive_seconds(text: str) -> float:
+    """argparse type: a finite number of seconds > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected seconds, got {text!r}") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"expected seconds > 0, got {text}")
     return value
 
 
@@ -45,7 +57,7 @@ def add_slam_arguments(command: argparse.ArgumentParser, runs_help: str) -> None
         help="option of the SLAM system, repeatable (values parsed as JSON when they can be)",
     )
     command.add_argument("--runs", type=positive_int, default=1, metavar="N", help=runs_help + " (default: %(default)s)")
-    command.add_argument("--timeout", type=float, default=600.0, metavar="S", help="seconds per SLAM run before it is killed (default: %(default)s)")
+    command.add_argument("--timeout", type=positive_seconds, default=600.0, metavar="S", help="seconds per SLAM run before it is killed (default: %(default)s)")
 
 
 def add_cache_arguments(command: argparse.ArgumentParser, holds: str, no_cache: str | None = None) -> None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +28,30 @@ def _compare_fail(text: str) -> Any:
     return parse_compare_fail(text)
 
 
+#: ini options read as numbers: (type, smallest value, whether the smallest is excluded, what it is)
+_INI_NUMBERS: dict[str, tuple[type, float, bool, str]] = {
+    "sal_runs": (int, 1, False, "a whole number >= 1 (runs per trial)"),
+    "sal_seed": (int, 0, False, "a whole number >= 0 (perturbation seed)"),
+    "sal_max_trials": (int, 1, False, "a whole number >= 1 (trials per boundary search)"),
+    "sal_tolerance": (float, 0.0, True, "a number > 0 (percent of the envelope's edge)"),
+    "sal_noise": (float, 0.0, False, "a number >= 0 (relative distance of a metric to its threshold)"),
+    "sal_timeout": (float, 0.0, True, "a number > 0 (seconds per SLAM run)"),
+}
+
+
+def _ini_number(config: pytest.Config, name: str) -> Any:
+    """The ini option ``name`` as its number, or a usage error that names it and what it takes."""
+    kind, smallest, exclusive, what = _INI_NUMBERS[name]
+    text = str(config.getini(name)).strip()
+    try:
+        value = kind(text)
+    except ValueError:
+        value = None
+    if value is None or not math.isfinite(value) or value < smallest or (exclusive and value == smallest):
+        raise pytest.UsageError(f"pytest-sal: ini option {name} = {text!r}: expected {what}")
+    return value
+
+
 def _size(text: str) -> int:
     from pytest_sal.cache import parse_size
 
@@ -34,6 +59,13 @@ def _size(text: str) -> int:
         return parse_size(text)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _ini_size(text: str) -> int:
+    try:
+        return _size(text)
+    except argparse.ArgumentTypeError as exc:
+        raise pytest.UsageError(f"pytest-sal: ini option sal_cache_size = {text!r}: {exc}") from None
 
 
 def add_options(parser: pytest.Parser) -> None:
@@ -97,21 +129,23 @@ class SalSession:
             return config.getini(name)
 
         self.cache_dir = Path(getattr(opt, "sal_cache_dir", None) or ini("sal_cache_dir") or root / ".sal" / "cache")
-        self.cache_size = getattr(opt, "sal_cache_size", None) or (_size(ini("sal_cache_size")) if ini("sal_cache_size") else None)
+        self.cache_size = getattr(opt, "sal_cache_size", None) or (_ini_size(ini("sal_cache_size")) if ini("sal_cache_size") else None)
         self.use_cache = not getattr(opt, "sal_no_cache", False)
         self.history_dir = Path(getattr(opt, "sal_history_dir", None) or ini("sal_history_dir") or root / ".sal" / "history")
         self.compare = getattr(opt, "sal_compare", None)
         self.checks = list(getattr(opt, "sal_compare_fail", []) or [])
         if self.checks and self.compare is None:
             self.compare = "last"
-        self.runs = int(ini("sal_runs"))
-        self.seed = int(ini("sal_seed"))
-        self.timeout = float(ini("sal_timeout"))
+        self.runs = _ini_number(config, "sal_runs")
+        self.seed = _ini_number(config, "sal_seed")
+        self.timeout = _ini_number(config, "sal_timeout")
         self.system_name = ini("sal_system")
         from pytest_sal.robustness import SearchSettings
 
         self.settings = SearchSettings(
-            tolerance_pct=float(ini("sal_tolerance")), max_trials=int(ini("sal_max_trials")), noise=float(ini("sal_noise"))
+            tolerance_pct=_ini_number(config, "sal_tolerance"),
+            max_trials=_ini_number(config, "sal_max_trials"),
+            noise=_ini_number(config, "sal_noise"),
         )
         self.outcomes: list[Any] = []
         self._cache: Any = None

@@ -82,6 +82,16 @@ def test_usage_errors_come_from_argparse():
     assert result.returncode == 2 and "expected a number >= 1, got 0" in result.stderr
 
 
+@pytest.mark.parametrize("value", ["-3", "0", "nan", "soon"])
+def test_a_timeout_must_be_seconds_above_zero(value, tmp_path):
+    """A negative timeout used to kill every run at once and report a boundary of failures."""
+    config = tmp_path / "never_read.yaml"  # argparse rejects the value before the config is read
+    result = run_sal("boundary", str(config), "--slam", "reference_vo", "--timeout", value)
+    assert result.returncode == 2
+    expected = f"expected seconds, got {value!r}" if value == "soon" else f"expected seconds > 0, got {value}"
+    assert result.stderr.strip().endswith(f"sal boundary: error: argument --timeout: {expected}")
+
+
 def test_demo_renders_both_scenes_and_writes_previews(tmp_path, capsys):
     import cv2
 

@@ -96,3 +96,25 @@ def test_help_lists_the_options_and_a_bad_check_is_a_usage_error(pytester: pytes
     bad = run(pytester, mode, "--sal-compare-fail=foo")
     assert bad.ret == pytest.ExitCode.USAGE_ERROR
     bad.stderr.fnmatch_lines(["*--sal-compare-fail: 'foo': expected WHAT:LIMIT; valid forms: boundary:10% *boundary:2.5 *METRIC:0.2*"])
+
+
+BAD_INI = [
+    ("sal_runs", "abc", "expected a whole number >= 1 (runs per trial)"),
+    ("sal_runs", "0", "expected a whole number >= 1 (runs per trial)"),
+    ("sal_seed", "1.5", "expected a whole number >= 0 (perturbation seed)"),
+    ("sal_max_trials", "-2", "expected a whole number >= 1 (trials per boundary search)"),
+    ("sal_tolerance", "x", "expected a number > 0 (percent of the envelope's edge)"),
+    ("sal_noise", "nan", "expected a number >= 0 (relative distance of a metric to its threshold)"),
+    ("sal_timeout", "-1", "expected a number > 0 (seconds per SLAM run)"),
+    ("sal_cache_size", "lots", "invalid size 'lots': expected bytes with an optional unit*"),
+]
+
+
+@pytest.mark.parametrize(("name", "value", "message"), BAD_INI, ids=[f"{n}={v}" for n, v, _ in BAD_INI])
+def test_a_bad_ini_value_is_a_usage_error_naming_the_option(pytester: pytest.Pytester, name: str, value: str, message: str) -> None:
+    pytester.makeconftest(CONFTEST)
+    pytester.makepyfile(test_suite=HEADER + "@sal.require(tracking_rate >= 0.5, fog.visibility_m >= 25)\ndef test_x(sal_outcome): pass\n")
+    result = run(pytester, [], "-o", f"{name}={value}")
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    result.stderr.fnmatch_lines([f"ERROR: pytest-sal: ini option {name} = {value!r}: {message}"])
+    assert calls(pytester) == 0
