@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 from pathlib import Path
 from typing import Any
 
@@ -59,6 +60,24 @@ def _size(text: str) -> int:
         return parse_size(text)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _check_writable(path: Path, option: str, folder: bool) -> None:
+    """Stop the session before anything runs when ``path`` (a folder, or a file with
+    ``folder=False``) cannot be created or written: a nearer existing part is a file, or the
+    existing folder it goes in is read-only."""
+    existing = path
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if existing == path and folder != path.is_dir():
+        problem = f"{path} exists and is not a folder" if folder else f"{path} is a folder"
+    elif existing != path and not existing.is_dir():
+        problem = f"{existing} is not a folder, so {path} cannot be created"
+    elif not os.access(existing if existing.is_dir() else existing.parent, os.W_OK):
+        problem = f"{existing} is not writable"
+    else:
+        return
+    raise pytest.UsageError(f"pytest-sal: {option} {path}: {problem}; give another {'folder' if folder else 'file'}")
 
 
 def _ini_size(text: str) -> int:
@@ -147,6 +166,18 @@ class SalSession:
             max_trials=_ini_number(config, "sal_max_trials"),
             noise=_ini_number(config, "sal_noise"),
         )
+        if self.use_cache:
+            _check_writable(self.cache_dir, "cache folder (--sal-cache-dir, ini sal_cache_dir)", folder=True)
+        if not getattr(opt, "sal_no_history", False):
+            _check_writable(self.history_dir, "history folder (--sal-history-dir, ini sal_history_dir)", folder=True)
+        for option, folder in (("sal_report_html", True), ("sal_report_md", False)):
+            if getattr(opt, option, None):
+                _check_writable(Path(getattr(opt, option)), "--" + option.replace("_", "-"), folder=folder)
+        if self.system_name:
+            from sal_wrappers import SYSTEMS
+
+            if self.system_name not in SYSTEMS.names():
+                raise pytest.UsageError(f"pytest-sal: ini option sal_system = {self.system_name!r}: unknown SLAM system; known: {', '.join(SYSTEMS.names())}")
         self.outcomes: list[Any] = []
         self._cache: Any = None
         self._history: Any = None

@@ -118,3 +118,25 @@ def test_a_bad_ini_value_is_a_usage_error_naming_the_option(pytester: pytest.Pyt
     assert result.ret == pytest.ExitCode.USAGE_ERROR
     result.stderr.fnmatch_lines([f"ERROR: pytest-sal: ini option {name} = {value!r}: {message}"])
     assert calls(pytester) == 0
+
+
+BAD_OUTPUTS = [
+    ("--sal-history-dir=/dev/null/x", "history folder (--sal-history-dir, ini sal_history_dir) /dev/null/x: /dev/null is not a folder, so /dev/null/x cannot be created; give another folder"),
+    ("--sal-cache-dir=/dev/null/x", "cache folder (--sal-cache-dir, ini sal_cache_dir) /dev/null/x: /dev/null is not a folder, so /dev/null/x cannot be created; give another folder"),
+    ("--sal-report-html=/dev/null", "--sal-report-html /dev/null: /dev/null exists and is not a folder; give another folder"),
+    ("--sal-report-md={tmp}", "--sal-report-md {tmp}: {tmp} is a folder; give another file"),
+    ("-o sal_system=nosuch", "ini option sal_system = 'nosuch': unknown SLAM system; known: command, orbslam3, reference_vo"),
+]
+
+
+@pytest.mark.parametrize(("option", "message"), BAD_OUTPUTS, ids=[o.split("=")[0] for o, _ in BAD_OUTPUTS])
+def test_an_unusable_output_location_stops_the_session_before_any_run(pytester: pytest.Pytester, option: str, message: str) -> None:
+    """These used to end in a traceback after every test had run (history, reports) or fail
+    every test (cache folder, system)."""
+    pytester.makeconftest(CONFTEST)
+    pytester.makepyfile(test_suite=HEADER + "@sal.require(tracking_rate >= 0.5, fog.visibility_m >= 25)\ndef test_x(sal_outcome): pass\n")
+    # the inner run() already passes its own --sal-cache-dir and --sal-history-dir; the last one given wins
+    result = run(pytester, [], *option.replace("{tmp}", str(pytester.path)).split(" "))
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    result.stderr.fnmatch_lines(["ERROR: pytest-sal: " + message.replace("{tmp}", str(pytester.path))])
+    assert calls(pytester) == 0
