@@ -181,6 +181,13 @@ class SalSession:
         self.outcomes: list[Any] = []
         self._cache: Any = None
         self._history: Any = None
+        if self.compare not in (None, "last") and self.history_dir.is_dir() and self.history.runs():
+            from sal_adapters import SalError
+
+            try:  # a ref that names no saved run; with no history yet there is nothing to compare
+                self.history.find_runs(self.compare)
+            except SalError as exc:
+                raise pytest.UsageError(f"pytest-sal: --sal-compare={self.compare}: {exc}") from None
         self._datasets: dict[str, Any] = {}
 
     # -- collaborators -------------------------------------------------------------------------

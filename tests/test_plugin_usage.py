@@ -140,3 +140,14 @@ def test_an_unusable_output_location_stops_the_session_before_any_run(pytester: 
     assert result.ret == pytest.ExitCode.USAGE_ERROR
     result.stderr.fnmatch_lines(["ERROR: pytest-sal: " + message.replace("{tmp}", str(pytester.path))])
     assert calls(pytester) == 0
+
+
+def test_compare_with_a_run_the_history_lacks_is_a_usage_error(pytester: pytest.Pytester) -> None:
+    pytester.makeconftest(CONFTEST)
+    pytester.makepyfile(test_suite=HEADER + "@sal.require(tracking_rate >= 0.5, fog.visibility_m >= 25)\ndef test_x(sal_outcome): pass\n")
+    assert run(pytester, [], "--sal-compare=nightly").ret == pytest.ExitCode.OK  # no history yet: nothing to compare
+    assert run(pytester, [], "--sal-save=main").ret == pytest.ExitCode.OK
+    assert run(pytester, [], "--sal-compare=main").ret == pytest.ExitCode.OK
+    result = run(pytester, [], "--sal-compare=nightly")
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    result.stderr.fnmatch_lines(["ERROR: pytest-sal: --sal-compare=nightly: no run 'nightly' in the history *: give 'last', a run number, a run name or a commit prefix (latest runs: 0001, 0002 (main), 0003)"])
