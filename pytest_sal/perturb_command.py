@@ -68,7 +68,8 @@ def run_perturb(config: ExperimentConfig, *, dry_run: bool = False, cache_dir: P
     ``pipeline_results.json`` (or the plan)."""
     import sys
 
-    from pytest_sal.cache import cache_key, command_cache
+    from pytest_sal.cache import command_cache
+    from pytest_sal.cache_keys import cache_key
 
     out = out or sys.stdout
     clean = build_sequence(config)

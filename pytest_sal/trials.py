@@ -17,7 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from pytest_sal.cache import ContentCache, cache_key
+from pytest_sal.cache import ContentCache
+from pytest_sal.cache_keys import cache_key
 from pytest_sal.metrics import evaluate
 from pytest_sal.outcome import Trial
 from pytest_sal.requirements import Requirement

@@ -23,10 +23,10 @@ from pytest_sal.cache import (
     CacheError,
     CacheWarning,
     ContentCache,
-    cache_key,
     default_cache_dir,
     parse_size,
 )
+from pytest_sal.cache_keys import cache_key
 from pytest_sal.cli import main
 from sal_adapters import SalError, open_dataset, write_sequence
 
@@ -57,7 +57,7 @@ def test_key_is_sha256_of_documented_canonical_json() -> None:
 
 
 def test_key_is_stable_across_processes() -> None:
-    code = "import json,sys; from pytest_sal.cache import cache_key; print(cache_key(**json.loads(sys.argv[1])))"
+    code = "import json,sys; from pytest_sal.cache_keys import cache_key; print(cache_key(**json.loads(sys.argv[1])))"
     out = subprocess.run([sys.executable, "-c", code, json.dumps(BASE)], capture_output=True, text=True, check=True, cwd=REPO,
                          env={**os.environ, "PYTHONHASHSEED": "123"})
     assert out.stdout.strip() == cache_key(**BASE)
