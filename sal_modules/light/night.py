@@ -48,6 +48,8 @@ import cv2
 import numpy as np
 
 from sal_modules.base import ModuleContext
+from sal_modules.buffers import scratch
+from sal_modules.colour import srgb_to_linear
 from sal_modules.errors import ModuleError
 from sal_modules.light.sensor import (
     LUMA,
@@ -55,7 +57,6 @@ from sal_modules.light.sensor import (
     adc_bits_param,
     full_well_param,
     read_noise_param,
-    srgb_to_linear,
     white_balance,
 )
 from sal_modules.params import Param, SearchScale
@@ -138,7 +139,7 @@ class Night(SensorModule):
             if self.ready_context().sequence.grayscale:  # a grey camera sees the network's night in grey
                 mean[:] = (mean @ LUMA.astype(np.float32))[..., None]
         else:
-            mean = srgb_to_linear(image)
+            mean = srgb_to_linear(image, out=scratch("night.linear", image.shape))
             mean *= self._scale
         return self.read_out(mean, index, stream, self._exposure.gain, self._exposure.brightness)
 

@@ -51,6 +51,8 @@ from functools import lru_cache
 import numpy as np
 
 from sal_modules.base import Perturbation
+from sal_modules.buffers import scratch
+from sal_modules.colour import encode_table
 from sal_modules.params import Param
 
 __all__ = [
@@ -61,44 +63,15 @@ __all__ = [
     "full_well_param",
     "linear_to_srgb",
     "read_noise_param",
-    "srgb_to_linear",
     "standard_normals",
     "white_balance",
 ]
-
-#: Levels of the table that encodes linear light to 8-bit sRGB (16 bits: exact round trips).
-ENCODE_LEVELS = 65536
 
 #: Rec. 709 / sRGB luminance weights of linear R, G, B.
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 
 #: XYZ -> linear sRGB (D65).
 _XYZ_TO_RGB = np.array([[3.2406, -1.5372, -0.4986], [-0.9689, 1.8758, 0.0415], [0.0557, -0.2040, 1.0570]])
-
-
-def _decode(v: np.ndarray) -> np.ndarray:
-    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
-
-
-def _encode(x: np.ndarray) -> np.ndarray:
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(np.maximum(x, 0.0031308), 1 / 2.4) - 0.055)
-
-
-#: 8-bit sRGB -> linear light (float32, 0..1).
-_DECODE = _decode(np.arange(256) / 255.0).astype(np.float32)
-
-
-@lru_cache(maxsize=8)
-def _encode_table(levels: int) -> np.ndarray:
-    """uint8 sRGB of each of ``levels`` evenly spaced linear values 0..1."""
-    return np.round(255.0 * _encode(np.arange(levels) / (levels - 1))).astype(np.uint8)
-
-
-def srgb_to_linear(image: np.ndarray) -> np.ndarray:
-    """Linear light (float32, 0..1) of an sRGB image: uint8 (a table) or float 0..1."""
-    if image.dtype == np.uint8:
-        return _DECODE[image]
-    return _decode(np.clip(image, 0.0, 1.0)).astype(np.float32)
 
 
 def quantise(linear: np.ndarray, bits: int) -> np.ndarray:
@@ -108,7 +81,7 @@ def quantise(linear: np.ndarray, bits: int) -> np.ndarray:
     linear *= np.float32(top)
     linear += np.float32(0.5)
     np.clip(linear, 0.0, top, out=linear)
-    return _encode_table(1 << bits)[linear.astype(np.uint16)]
+    return encode_table(1 << bits)[linear.astype(np.uint16)]
 
 
 def linear_to_srgb(linear: np.ndarray) -> np.ndarray:
@@ -187,7 +160,7 @@ class Sensor:
         shot and read noise drawn from ``normals`` (``None`` when nothing is missing)."""
         a, b = self.missing_variance(gain, brightness)
         if normals is not None and (a > 0.0 or b > 0.0):
-            noise = mean * np.float32(a)
+            noise = np.multiply(mean, np.float32(a), out=scratch("sensor.noise", mean.shape))
             noise += np.float32(b)
             np.maximum(noise, 0.0, out=noise)
             np.sqrt(noise, out=noise)

@@ -24,12 +24,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from sal_modules.buffers import scratch
+from sal_modules.colour import srgb_to_linear
 from sal_modules.light.sensor import (
     SensorModule,
     adc_bits_param,
     full_well_param,
     read_noise_param,
-    srgb_to_linear,
 )
 from sal_modules.params import Param, SearchScale
 
@@ -60,4 +61,4 @@ class SensorNoise(SensorModule):
 
     def apply(self, image: np.ndarray, depth: np.ndarray | None, index: int, stream: str) -> np.ndarray:
         self.ready_context()
-        return self.read_out(srgb_to_linear(image), index, stream, self.gain, 1.0)
+        return self.read_out(srgb_to_linear(image, out=scratch("sensor_noise.linear", image.shape)), index, stream, self.gain, 1.0)

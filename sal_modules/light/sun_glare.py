@@ -44,8 +44,9 @@ import math
 import numpy as np
 
 from sal_modules.base import ModuleContext, Perturbation
+from sal_modules.colour import srgb_to_linear
 from sal_modules.errors import ModuleError
-from sal_modules.light.sensor import LUMA, linear_to_srgb, srgb_to_linear, white_balance
+from sal_modules.light.sensor import LUMA, linear_to_srgb, white_balance
 from sal_modules.params import Param
 
 __all__ = ["GHOSTS", "SunGlare", "sun_direction"]

@@ -47,6 +47,7 @@ import numpy as np
 from sal_adapters.camera import Camera
 from sal_modules.base import ModuleContext, Perturbation
 from sal_modules.buffers import scratch
+from sal_modules.colour import DECODE_TABLE, encode_table, srgb_decode, srgb_to_linear
 from sal_modules.params import Param
 from sal_modules.weather.noise import GradientNoise
 
@@ -57,8 +58,6 @@ __all__ = [
     "estimate_atmospheric_light",
     "first_frame_airlight",
     "ray_lengths",
-    "srgb_decode",
-    "srgb_to_linear",
 ]
 
 #: Spacing (px) of the coarse grid on which heterogeneous fog integrates its rays.
@@ -68,27 +67,6 @@ MEAN_SUBSAMPLE = 4
 #: Beyond this many visibilities the transmission is below 1e-5 for any plausible density.
 _MAX_DISTANCE_IN_V = 10.0
 _SHELL_GROWTH = 0.06
-
-
-def srgb_decode(values: Any) -> np.ndarray:
-    """sRGB-encoded values in [0, 1] -> linear radiance (float64), IEC 61966-2-1."""
-    v = np.asarray(values, dtype=np.float64)
-    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
-
-
-def _srgb_encode(linear: np.ndarray) -> np.ndarray:
-    v = np.clip(np.asarray(linear, dtype=np.float64), 0.0, 1.0)
-    return np.where(v <= 0.0031308, 12.92 * v, 1.055 * v ** (1 / 2.4) - 0.055)
-
-
-_DECODE = srgb_decode(np.arange(256) / 255.0).astype(np.float32)
-#: uint16 linear code (linear * 65535) -> nearest sRGB uint8 code.
-_ENCODE = np.rint(255.0 * _srgb_encode(np.arange(65536) / 65535.0)).astype(np.uint8)
-
-
-def srgb_to_linear(image: np.ndarray) -> np.ndarray:
-    """uint8 sRGB image -> float32 linear radiance in [0, 1] (a 256-entry table)."""
-    return cv2.LUT(image, _DECODE)
 
 
 def blend_srgb(image: np.ndarray, gain: np.ndarray, terms: list[tuple[np.ndarray, Any]]) -> np.ndarray:
@@ -108,13 +86,13 @@ def blend_srgb(image: np.ndarray, gain: np.ndarray, terms: list[tuple[np.ndarray
     code, codes = scratch("blend.code", shape, np.uint16), scratch("blend.codes", shape + (3,), np.uint16)
     for c in range(3):
         cv2.extractChannel(image, c, dst=plane)
-        cv2.LUT(plane, _DECODE, dst=value)
+        cv2.LUT(plane, DECODE_TABLE, dst=value)
         cv2.multiply(value, gain, dst=value)
         for weight, colour in terms:
             cv2.scaleAdd(weight, float(colour[c]), value, dst=value)
         cv2.addWeighted(value, 65535.0, value, 0.0, 0.0, dst=code, dtype=cv2.CV_16U)
         cv2.insertChannel(code, codes, c)
-    return np.take(_ENCODE, codes, out=np.empty(shape + (3,), np.uint8))
+    return np.take(encode_table(65536), codes, out=np.empty(shape + (3,), np.uint8))
 
 
 def estimate_atmospheric_light(image: np.ndarray, depth: np.ndarray | None = None) -> np.ndarray:

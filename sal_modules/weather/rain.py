@@ -23,8 +23,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from sal_modules.colour import srgb_to_linear
 from sal_modules.params import Param
-from sal_modules.weather.fog import srgb_to_linear
 from sal_modules.weather.precipitation import Precipitation
 
 __all__ = ["Rain"]
