@@ -52,12 +52,15 @@ class Metric:
         unit: its unit, for messages.
         better: ``lower`` or ``higher``.
         doc: one line.
+        lowest, highest: the values the metric can take (a criterion outside them is refused).
     """
 
     name: str
     unit: str
     better: str
     doc: str = ""
+    lowest: float = 0.0
+    highest: float = math.inf
 
     def _criterion(self, op: str, value: Any) -> Criterion:
         if not isinstance(value, numbers.Real) or isinstance(value, bool) or not math.isfinite(float(value)):
@@ -66,7 +69,18 @@ class Metric:
                 f"{self.name} {op} {value!r}: compare a metric with a finite number in {self.unit or 'its unit'}, "
                 f"e.g. {self.name} {'<' if self.better == 'lower' else '>='} {example}"
             )
-        return Criterion(self, op, float(value))
+        threshold = float(value)
+        lo, hi = self.lowest, self.highest
+        never = {"<": threshold <= lo, "<=": threshold < lo, ">": threshold >= hi, ">=": threshold > hi}[op]
+        always = {"<": threshold > hi, "<=": threshold >= hi, ">": threshold < lo, ">=": threshold <= lo}[op]
+        if never or always:
+            unit = f" {self.unit}" if self.unit else ""
+            span = f"{lo:g} .. {hi:g}{unit}" if math.isfinite(hi) else f"{lo:g}{unit} or more"
+            raise InvalidRequirement(
+                f"{self.name} {op} {threshold:g}{unit} {'can never hold' if never else 'always holds, so it tests nothing'}: "
+                f"{self.name} is {span}; pick a threshold inside that range"
+            )
+        return Criterion(self, op, threshold)
 
     def __lt__(self, value: Any) -> Criterion:
         return self._criterion("<", value)
@@ -89,7 +103,7 @@ class Metric:
 ate_rmse = Metric("ate_rmse", "m", "lower", "absolute trajectory error, RMSE after SE(3) (Sim(3) for mono) alignment")
 rpe_trans = Metric("rpe_trans", "m/m", "lower", "relative translation error per metre travelled (RMSE)")
 rpe_rot = Metric("rpe_rot", "deg/m", "lower", "relative rotation error per metre travelled (RMSE)")
-tracking_rate = Metric("tracking_rate", "", "higher", "frames with a valid pose / frames given")
+tracking_rate = Metric("tracking_rate", "", "higher", "frames with a valid pose / frames given", highest=1.0)
 scale_error = Metric("scale_error", "", "lower", "|1 - s| of the Sim(3) alignment (mono)")
 
 #: Metrics by name.
@@ -203,6 +217,20 @@ def _check_envelope(bound: Bound) -> None:
         raise InvalidRequirement(f"{bound}: {exc}") from None
 
 
+def _check_search_range(envelope: Bound, search_range: Any) -> None:
+    """``search_range`` must be an interval inside the scale the search walks."""
+    scale = envelope.ref.param.search_space()
+    unit = f" {scale.unit}" if scale.unit else ""
+    lo, hi = sorted(float(v) for v in search_range)
+    if not (math.isfinite(lo) and math.isfinite(hi)) or lo == hi:
+        raise InvalidRequirement(f"sal.require(): search_range {tuple(search_range)!r} must be two finite numbers low < high, in{unit or ' the unit'}")
+    if lo < scale.min or hi > scale.max:
+        raise InvalidRequirement(
+            f"sal.require(): search_range ({lo:g}, {hi:g}){unit} leaves the valid range of {envelope.ref.label}, "
+            f"{scale.min:g} .. {scale.max:g}{unit}"
+        )
+
+
 def _searchable_names(owner: Any) -> list[str]:
     return list(owner.searchable()) if owner is not None and hasattr(owner, "searchable") else []
 
@@ -225,3 +253,4 @@ def _check_options(options: Mapping[str, Any], envelope: Bound | None) -> None:
             raise InvalidRequirement("sal.require(): search_range needs a parameter bound to search")
         if not (isinstance(search_range, (tuple, list)) and len(search_range) == 2 and all(isinstance(v, numbers.Real) for v in search_range)):
             raise InvalidRequirement(f"sal.require(): search_range must be (low, high) in {envelope.ref.param.unit or 'the unit'}, got {search_range!r}")
+        _check_search_range(envelope, search_range)

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import math
+import re
 
 import pytest
 
+import pytest_sal as sal
 from pytest_sal import InvalidRequirement, ate_rmse, tracking_rate
 from pytest_sal.requirements import Requirement
 from pytest_sal.search import SearchSpace, boundary_search
@@ -121,6 +123,30 @@ def test_chain_parameters_and_percent_search_units() -> None:
 def test_misuse_says_what_to_write_instead(items, message: str) -> None:
     with pytest.raises(InvalidRequirement, match=message.replace("(", r"\(").replace(")", r"\)")):
         Requirement.build(items)
+
+
+@pytest.mark.parametrize(
+    ("build", "message"),
+    [
+        (lambda: ate_rmse < 0, "ate_rmse < 0 m can never hold: ate_rmse is 0 m or more; pick a threshold inside that range"),
+        (lambda: ate_rmse >= 0, "ate_rmse >= 0 m always holds, so it tests nothing: ate_rmse is 0 m or more"),
+        (lambda: tracking_rate >= 1.5, "tracking_rate >= 1.5 can never hold: tracking_rate is 0 .. 1"),
+        (lambda: tracking_rate <= 1, "tracking_rate <= 1 always holds, so it tests nothing: tracking_rate is 0 .. 1"),
+        (lambda: sal.require(ate_rmse < 1, fog.visibility_m >= 25, search_range=(0.1, 30)),
+         "search_range (0.1, 30) m leaves the valid range of fog.visibility_m, 1 .. 100000 m"),
+        (lambda: sal.require(ate_rmse < 1, fog.visibility_m >= 25, search_range=(30, 30)),
+         "search_range (30, 30) must be two finite numbers low < high, in m"),
+    ],
+    ids=["ate<0", "ate>=0", "rate>=1.5", "rate<=1", "range-outside", "range-empty"],
+)
+def test_a_requirement_that_cannot_fail_or_cannot_pass_is_refused(build, message: str) -> None:
+    with pytest.raises(InvalidRequirement, match=re.escape(message)):
+        build()
+
+
+def test_thresholds_at_the_ends_of_a_metric_still_test_something() -> None:
+    assert str(tracking_rate >= 1) == "tracking_rate >= 1" and str(ate_rmse <= 0) == "ate_rmse <= 0 m"
+    assert str(tracking_rate > 0) == "tracking_rate > 0"
 
 
 def test_comparing_with_a_string_is_an_error_naming_the_unit() -> None:
