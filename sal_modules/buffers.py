@@ -1,7 +1,8 @@
 """Per-thread work arrays that modules reuse from frame to frame.
 
 Allocating ~20 MB of fresh temporaries per frame costs more in page faults than the
-arithmetic on them, so the per-frame hot paths (fog, rain, snow, defocus) write into these.
+arithmetic on them, so the per-frame hot paths (fog, rain, snow, defocus, night, sensor_noise)
+write into these.
 """
 
 from __future__ import annotations
