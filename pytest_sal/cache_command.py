@@ -84,6 +84,9 @@ def _run_clear(args: argparse.Namespace) -> int:
     cache = ContentCache(args.cache_dir.expanduser())
     if cache.root.exists() and not cache.root.is_dir():
         cache.stats()  # raises the "not a folder" error
+    if not cache.root.exists():
+        print(f"no cache folder at {cache.root}; nothing removed")
+        return 0
     before = cache.stats()["entries"]
     removed = cache.clear()
     kept = before - removed

@@ -469,6 +469,9 @@ def test_cli_info_and_clear(tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
     assert main(["cache", "clear", "--cache-dir", str(root)]) == 0
     assert f"removed 2 cache entries from {root}" in capsys.readouterr().out
     assert cache.stats()["entries"] == 0
+    assert main(["cache", "clear", "--cache-dir", str(tmp_path / "typo")]) == 0  # a mistyped folder is not "0 removed"
+    assert capsys.readouterr().out == f"no cache folder at {tmp_path / 'typo'}; nothing removed\n"
+    assert not (tmp_path / "typo").exists()
 
 
 def test_cli_default_dir_errors_and_help(tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
