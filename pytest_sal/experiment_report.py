@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from pytest_sal.report_html import REPORT_CSS, asset_src, esc
+from pytest_sal.report_html import REPORT_CSS, asset_src, esc, html_page
 from pytest_sal.requirements import METRICS
 from sal_adapters import SalError, Sequence, open_dataset
 from sal_adapters.datasets import WRITTEN_MARKER
@@ -133,13 +133,13 @@ def write_experiment_report(folder: str | Path, out_dir: str | Path | None = Non
     dataset = (pipeline or {}).get("dataset") or {}
     where = f"{dataset.get('type', '')} {dataset.get('name', '')}, {dataset.get('frames', '?')} frames" if dataset else ""
     problems = "".join(f"<li>{esc(p)}</li>" for p in page.problems)
-    text = _PAGE.format(
-        title=esc(f"Experiment {name}"),
-        css=REPORT_CSS + _EXTRA_CSS,
+    title = f"Experiment {name}"
+    text = html_page(title, REPORT_CSS + _EXTRA_CSS, _BODY.format(
+        title=esc(title),
         where=esc(f"{where} - {folder}" if where else str(folder)),
         problems=f"<section class='problems'><h2>Left out</h2><ul>{problems}</ul></section>" if problems else "",
         sections="\n".join(sections),
-    )
+    ))
     return atomic_write_text(out_dir / "index.html", text)
 
 
@@ -384,21 +384,9 @@ def _file_stem(name: str) -> str:
     return "".join(c if c.isalnum() or c in "._-" else "_" for c in name) or "sequence"
 
 
-_PAGE = """<!DOCTYPE html>
-<html lang="en">
-<head>
-<meta charset="utf-8">
-<meta name="viewport" content="width=device-width, initial-scale=1">
-<title>{title}</title>
-<style>{css}</style>
-</head>
-<body>
-<header><h1>{title}</h1><p class="where">{where}</p></header>
+_BODY = """<header><h1>{title}</h1><p class="where">{where}</p></header>
 {problems}
-{sections}
-</body>
-</html>
-"""
+{sections}"""
 
 _EXTRA_CSS = """
 section { margin: 1.4em 0 2.2em; }

@@ -41,11 +41,11 @@ from pytest_sal.report import (
     trial_metric_names,
     truncate_left,
     with_unit,
-    write_text_atomic,
 )
 from pytest_sal.requirements import METRICS
+from sal_adapters.textfiles import atomic_write_text
 
-__all__ = ["REPORT_CSS", "asset_src", "esc", "metric_figure", "metric_plot", "write_html_report"]
+__all__ = ["REPORT_CSS", "asset_src", "esc", "html_page", "metric_figure", "metric_plot", "write_html_report"]
 
 PASS_COLOUR = "#2ca02c"
 FAIL_COLOUR = "#d62728"
@@ -223,16 +223,15 @@ def write_html_report(outcomes: Iterable[Outcome], directory: str | Path, *, tit
             cells.append(f"<td{_num_cls(align == '>')}>{text}</td>")
         body.append(f"<tr class='{row['status']}'>{''.join(cells)}</tr>")
     where = sorted({" on ".join(x for x in (o.commit, o.machine) if x) for o in outcomes if o.commit or o.machine})
-    page = _PAGE.format(
+    page = html_page(title, REPORT_CSS, _BODY.format(
         title=esc(title),
-        css=REPORT_CSS,
         headline=esc(headline(outcomes)),
         where=f"<p class='where'>{esc(', '.join(where))}</p>" if where else "",
         head=head,
         rows="\n".join(body),
         sections="\n".join(sections),
-    )
-    return write_text_atomic(directory / "index.html", page)
+    ))
+    return atomic_write_text(directory / "index.html", page)
 
 
 def _section(o: Outcome, slug: str, directory: Path) -> str:
@@ -349,7 +348,13 @@ def _badge(state: str) -> str:
     return f"<span class='badge {esc(state)}'>{esc(state)}</span>"
 
 
-_PAGE = """<!DOCTYPE html>
+def html_page(title: str, css: str, body: str) -> str:
+    """A whole HTML document: UTF-8, a responsive viewport, ``title`` (escaped here), ``css``
+    in a style element and ``body`` (HTML) as the body."""
+    return _DOCUMENT.format(title=esc(title), css=css, body=body)
+
+
+_DOCUMENT = """<!DOCTYPE html>
 <html lang="en">
 <head>
 <meta charset="utf-8">
@@ -358,16 +363,18 @@ _PAGE = """<!DOCTYPE html>
 <style>{css}</style>
 </head>
 <body>
-<header><h1>{title}</h1><p class="headline">{headline}</p>{where}</header>
+{body}
+</body>
+</html>
+"""
+
+_BODY = """<header><h1>{title}</h1><p class="headline">{headline}</p>{where}</header>
 <table class="summary"><thead><tr>{head}</tr></thead>
 <tbody>
 {rows}
 </tbody></table>
 <p class="dim">margin and change: + towards the severe side (the system copes with more)</p>
-{sections}
-</body>
-</html>
-"""
+{sections}"""
 
 REPORT_CSS = """
 body { font: 14px/1.45 system-ui, -apple-system, "Segoe UI", Roboto, sans-serif; color: #1f2328;
