@@ -202,7 +202,7 @@ class History:
         number = self._reserve_number()
         stem = f"{number:04d}_{commit or 'nogit'}{'-dirty' if dirty else ''}_{now:%Y%m%dT%H%M%SZ}"
         path = self.root / (f"{stem}_{_safe_name(name)}.json" if name else f"{stem}.json")
-        _write_atomic(path, text)
+        atomic_write_text(path, text)
         return path
 
     def _reserve_number(self) -> int:
@@ -307,10 +307,6 @@ def _read_run(path: Path) -> RunRecord | None:
     except (OSError, ValueError, TypeError, KeyError, AttributeError) as exc:
         warnings.warn(f"{path}: not a readable pytest-sal run, skipped ({exc})", stacklevel=3)
         return None
-
-
-def _write_atomic(path: Path, text: str) -> None:
-    atomic_write_text(path, text)
 
 
 def _safe_name(name: str) -> str:

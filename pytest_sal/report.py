@@ -366,12 +366,7 @@ def _metrics_summary(o: Outcome, t: Trial) -> str:
 
 def write_markdown(outcomes: Iterable[Outcome], path: str | Path, *, title: str = "Robustness") -> Path:
     """Write ``markdown_report`` to ``path`` atomically; return the path."""
-    return write_text_atomic(path, markdown_report(outcomes, title=title))
-
-
-def write_text_atomic(path: str | Path, text: str) -> Path:
-    """Write ``text`` (UTF-8) atomically (``sal_adapters.textfiles.atomic_write_text``)."""
-    return atomic_write_text(path, text)
+    return atomic_write_text(path, markdown_report(outcomes, title=title))
 
 
 # ---------------------------------------------------------------- HTML (pytest_sal.report_html)
