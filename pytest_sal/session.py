@@ -81,9 +81,11 @@ def _check_writable(path: Path, option: str, folder: bool) -> None:
 
 
 def _ini_size(text: str) -> int:
+    from pytest_sal.cache import parse_size
+
     try:
-        return _size(text)
-    except argparse.ArgumentTypeError as exc:
+        return parse_size(text)
+    except ValueError as exc:
         raise pytest.UsageError(f"pytest-sal: ini option sal_cache_size = {text!r}: {exc}") from None
 
 
@@ -181,7 +183,7 @@ class SalSession:
         self.outcomes: list[Any] = []
         self._cache: Any = None
         self._history: Any = None
-        if self.compare not in (None, "last") and self.history_dir.is_dir() and self.history.runs():
+        if self.compare not in (None, "last") and self.history.runs():
             from sal_adapters import SalError
 
             try:  # a ref that names no saved run; with no history yet there is nothing to compare
