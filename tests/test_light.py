@@ -13,8 +13,8 @@ import pytest
 
 from sal_adapters import DatasetWarning, Sequence, open_dataset
 from sal_modules import ModuleContext, ModuleError, create, perturb
-from sal_modules.light.night import auto_exposure
 from sal_modules.colour import srgb_to_linear
+from sal_modules.light.night import auto_exposure
 from sal_modules.light.sensor import LUMA, white_balance
 from sal_modules.light.sun_glare import GHOSTS, sun_direction
 

@@ -13,8 +13,8 @@ import pytest
 
 from sal_adapters import DatasetWarning, Sequence, open_dataset
 from sal_modules import ModuleContext, create, perturb
-from sal_modules.depth import DepthProvider, NativeDepth, select_depth_provider
 from sal_modules.colour import srgb_decode
+from sal_modules.depth import DepthProvider, NativeDepth, select_depth_provider
 from sal_modules.weather.fog import (
     Fog,
     estimate_atmospheric_light,
