@@ -94,7 +94,7 @@ class TrialRunner:
             dataset=self.dataset.fingerprint,
             module=module.to_dict(),
             seed=self.seed,
-            system={"name": self.system.name, "version": self.system.version, "options": self.system.options()},
+            system=self.system.identity(),
             runs=self.runs,
             **repeat,
         )

@@ -19,7 +19,8 @@ __all__ = ["RunResult", "SYSTEMS", "SlamSystem", "SlamSystemError", "TrackState"
 SYSTEMS: EntryPointRegistry[type[SlamSystem]] = EntryPointRegistry("sal.systems", "SLAM system")
 
 
-def create(name: str, **options: Any) -> SlamSystem:
-    """A configured SLAM system: ``create("orbslam3", features=2000)``. An unknown name lists
-    the known ones; a bad option is a ``SlamSystemError`` naming it."""
-    return SYSTEMS.get(name)(**options)
+def create(kind: str, /, **options: Any) -> SlamSystem:
+    """A configured SLAM system: ``create("orbslam3", features=2000)``. An unknown kind lists
+    the known ones; a bad option is a ``SlamSystemError`` naming it. ``kind`` is the registry
+    name; an option ``name=`` goes to the system (``command`` takes it as its display name)."""
+    return SYSTEMS.get(kind)(**options)

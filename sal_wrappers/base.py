@@ -10,7 +10,9 @@ with its reason and the tail of the log, so that the caller goes on with the nex
 from __future__ import annotations
 
 import enum
+import hashlib
 import json
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
@@ -20,7 +22,7 @@ import numpy as np
 from sal_adapters import Sequence, Trajectory
 from sal_adapters.errors import SalError
 
-__all__ = ["RunResult", "SlamSystem", "SlamSystemError", "TrackState"]
+__all__ = ["RunResult", "SlamSystem", "SlamSystemError", "TrackState", "file_sha256"]
 
 
 class SlamSystemError(SalError):
@@ -184,10 +186,13 @@ class SlamSystem:
 
     Subclasses set ``name``, ``sensors`` and ``description``, take their options as keyword
     arguments in ``__init__`` (checked there: ``SlamSystemError`` names a bad one) and implement
-    ``run``. ``options()`` returns the options as a JSON-ready dict (part of cache keys).
+    ``run``. ``options()`` returns the options as a JSON-ready dict; ``identity()`` adds to them
+    whatever else decides the results (the files a system runs) and is the cache key's part.
     """
 
-    name: ClassVar[str] = ""
+    #: the name shown in results, tables and history (the registry name; an instance may set
+    #: its own, as ``command``'s ``name=`` option does)
+    name: str = ""
     #: sensors the system can run on: a subset of ``mono``, ``stereo``, ``rgbd``
     sensors: ClassVar[tuple[str, ...]] = ()
     description: ClassVar[str] = ""
@@ -197,6 +202,11 @@ class SlamSystem:
     def options(self) -> dict[str, Any]:
         """The configured options (JSON-ready)."""
         return {}
+
+    def identity(self) -> dict[str, Any]:
+        """Everything that decides this system's results, for cache keys: name, version,
+        options, and the content of the files it runs (JSON-ready)."""
+        return {"name": self.name, "version": self.version, "options": self.options()}
 
     def mode_for(self, sequence: Sequence, mode: str | None = None) -> str:
         """The sensor mode to run ``sequence`` in: ``mode`` if given, else the sequence's own
@@ -218,3 +228,20 @@ class SlamSystem:
     def __repr__(self) -> str:
         opts = ", ".join(f"{k}={v!r}" for k, v in self.options().items())
         return f"{type(self).__name__}({opts})"
+
+
+_DIGESTS: dict[tuple[str, int, int, int], str] = {}
+
+
+def file_sha256(path: str | os.PathLike[str]) -> str:
+    """SHA-256 (hex) of a file's content, computed once per path, size, mtime and ctime in this
+    process: cheap to ask again for every trial's cache key. ``OSError`` when it cannot be read."""
+    resolved = Path(path).expanduser().resolve()
+    st = resolved.stat()
+    key = (str(resolved), st.st_size, st.st_mtime_ns, st.st_ctime_ns)
+    digest = _DIGESTS.get(key)
+    if digest is None:
+        with resolved.open("rb") as fh:
+            digest = hashlib.file_digest(fh, "sha256").hexdigest()
+        _DIGESTS[key] = digest
+    return digest

@@ -42,6 +42,7 @@ import hashlib
 import os
 import re
 import shlex
+import shutil
 import time
 from collections.abc import Mapping
 from pathlib import Path
@@ -57,7 +58,7 @@ from sal_adapters.textfiles import (
     format_float,
 )
 from sal_adapters.trajectory import seconds_to_ns
-from sal_wrappers.base import RunResult, SlamSystem, SlamSystemError, TrackState
+from sal_wrappers.base import RunResult, SlamSystem, SlamSystemError, TrackState, file_sha256
 from sal_wrappers.child import describe_exit, log_tail
 from sal_wrappers.command_output import (
     OUTPUT_FORMATS,
@@ -113,7 +114,16 @@ STAGE_DIR = "sequence"
 LOG_NAME = "run.log"
 
 _TOKEN = re.compile(r"\{\{|\}\}|\{([A-Za-z_][A-Za-z0-9_]*)\}")
-_OPTIONS = ("argv", "prefix", "output", "output_format", "time_unit", "keyframes", "layout", "sensor", "mode", "grayscale", "stage_dir", "settings", "env", "cwd")
+_OPTIONS = (
+    "argv", "prefix", "output", "output_format", "time_unit", "keyframes", "layout", "sensor", "mode", "grayscale",
+    "stage_dir", "settings", "env", "cwd", "name", "version", "depends",
+)
+_NAME = re.compile(r"[A-Za-z0-9._-]{1,64}")
+#: Most a ``depends`` folder may hold (its files are hashed for the cache key).
+DEPENDS_MAX_BYTES = 1 << 30
+DEPENDS_MAX_FILES = 20_000
+#: Skipped in a ``depends`` folder: caches that running the program rewrites, version control.
+_SKIPPED_DIRS = {"__pycache__", ".git", ".hg", ".svn", ".mypy_cache", ".pytest_cache", ".ruff_cache"}
 #: Names in the work folder that the system writes itself.
 _RESERVED = {"settings", LOG_NAME, "timestamps.txt", "timestamps_ns.txt", "associations.txt", "output_times.txt"}
 
@@ -165,6 +175,15 @@ class CommandSystem(SlamSystem):
             ``workdir/settings/<name>``; ``{settings}`` is its path.
         env: extra environment variables (values may hold placeholders).
         cwd: the program's working folder; default ``{workdir}``.
+        name: the name shown in results, tables, reports and history (default ``command``):
+            letters, digits, ``.``, ``_``, ``-``, at most 64 characters.
+        version: the program's version as you name it (a string); part of the cache key.
+        depends: more files or folders whose content decides the results (modules a script
+            imports, a vocabulary, a config): hashed into the cache key like the program itself.
+
+    The cache key (``identity()``) holds the options and the SHA-256 of the files the system
+    runs: the executable (``argv[0]``, looked up on ``PATH``), every other ``argv`` item that is
+    an existing file, the settings template and the ``depends`` files.
     """
 
     name = "command"
@@ -173,6 +192,10 @@ class CommandSystem(SlamSystem):
     version = 1
 
     def __init__(self, **options: Any):
+        name = options.get("name", "command")
+        if not isinstance(name, str) or not _NAME.fullmatch(name):
+            raise SlamSystemError(f"command: option name={name!r} is not allowed: give 1 to 64 letters, digits, '.', '_' or '-' (the name shown in results and history)")
+        self.name = name
         unknown = sorted(set(options) - set(_OPTIONS))
         if unknown:
             raise SlamSystemError(
@@ -248,6 +271,16 @@ class CommandSystem(SlamSystem):
             except (OSError, UnicodeDecodeError) as exc:
                 raise SlamSystemError(f"command: cannot read settings template {self.settings} as text ({exc})") from None
 
+        version = options.get("version")
+        if version is not None and (not isinstance(version, (str, int)) or isinstance(version, bool) or not str(version).strip()):
+            raise SlamSystemError(f"command: option version={version!r} is not allowed: give the program's version as a non-empty string")
+        self.program_version = None if version is None else str(version)
+        depends = options.get("depends") or []
+        self.depends = [Path(p).expanduser().resolve() for p in _string_list("depends", depends, allow_empty=True)]
+        for path in self.depends:
+            if not path.exists():
+                raise SlamSystemError(f"command: depends: {path} does not exist (list the files and folders whose content decides the results)")
+
         self._check_placeholders()
 
     # -- construction checks -------------------------------------------------------------------
@@ -298,7 +331,45 @@ class CommandSystem(SlamSystem):
             "settings_sha256": hashlib.sha256(self._settings_text.encode()).hexdigest() if self.settings else None,
             "env": dict(self.env),
             "cwd": self.cwd,
+            "name": self.name,
+            "version": self.program_version,
+            "depends": [str(p) for p in self.depends],
         }
+
+    def identity(self) -> dict[str, Any]:
+        """``SlamSystem.identity`` plus the system kind and the SHA-256 of every file it runs:
+        the executable, ``argv`` items that are files and ``depends`` (the settings template's
+        is in ``options()``)."""
+        files: dict[str, str | None] = {}
+        for arg, path in self._program_files():
+            files[arg] = None if path is None else _digest(path, "the argv file")
+        for path in self.depends:
+            files[str(path)] = _tree_digest(path) if path.is_dir() else _digest(path, "the depends file")
+        return {**super().identity(), "system": "command", "files": files}
+
+    def _program_files(self) -> list[tuple[str, Path | None]]:
+        """``(argv item, file)`` for the executable (``None``: not found) and each other argv
+        item that names an existing file; items with placeholders are left out."""
+        cwd = Path(self.cwd).expanduser() if self.cwd is not None and not placeholders_in(self.cwd) else None
+        base = cwd if cwd is not None and cwd.is_absolute() else Path.cwd()
+        path_var = self.env.get("PATH")
+        search = path_var if path_var is not None and not placeholders_in(path_var) else os.environ.get("PATH")
+        out: list[tuple[str, Path | None]] = []
+        for i, arg in enumerate(self.argv):
+            if placeholders_in(arg) or not arg:
+                continue
+            text = render(arg, {})
+            if i == 0 and os.sep not in text:
+                found = shutil.which(text, path=search)
+                out.append((arg, None if found is None else Path(found)))
+                continue
+            path = Path(text).expanduser()
+            path = path if path.is_absolute() else base / path
+            if path.is_file():
+                out.append((arg, path))
+            elif i == 0:
+                out.append((arg, None))
+        return out  # the settings template is in options() as settings_sha256: the text read at creation, the one rendered
 
     # -- running -------------------------------------------------------------------------------
     def run(self, sequence: Sequence, workdir: Path, timeout: float | None = None) -> RunResult:
@@ -452,6 +523,38 @@ class CommandSystem(SlamSystem):
 
 
 # -- helpers ---------------------------------------------------------------------------------------
+def _digest(path: Path, what: str) -> str:
+    try:
+        return file_sha256(path)
+    except OSError as exc:
+        raise SlamSystemError(f"command: cannot read {what} {path} to hash it for the cache key ({exc.strerror or exc})") from None
+
+
+def _tree_digest(folder: Path) -> str:
+    """SHA-256 over the sorted relative paths and contents of the files under ``folder``
+    (caches and version-control folders left out); at most ``DEPENDS_MAX_FILES`` files and
+    ``DEPENDS_MAX_BYTES`` bytes."""
+    files: list[tuple[str, Path]] = []
+    total = 0
+    for root, dirs, names in os.walk(folder):
+        dirs[:] = sorted(d for d in dirs if d not in _SKIPPED_DIRS)
+        for name in names:
+            path = Path(root) / name
+            if name.endswith((".pyc", ".pyo")) or not path.is_file():
+                continue
+            files.append((path.relative_to(folder).as_posix(), path))
+            total += path.stat().st_size
+            if len(files) > DEPENDS_MAX_FILES or total > DEPENDS_MAX_BYTES:
+                raise SlamSystemError(
+                    f"command: depends folder {folder} holds more than {DEPENDS_MAX_FILES} files or {DEPENDS_MAX_BYTES >> 20} MiB; "
+                    "list the files and smaller folders that decide the results instead"
+                )
+    digest = hashlib.sha256()
+    for relative, path in sorted(files):
+        digest.update(f"{relative}\0{_digest(path, 'the depends file')}\n".encode())
+    return digest.hexdigest()
+
+
 def _string_list(option: str, value: Any, allow_empty: bool) -> list[str]:
     if isinstance(value, (str, bytes)):
         raise SlamSystemError(

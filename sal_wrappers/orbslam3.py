@@ -239,6 +239,35 @@ class OrbSlam3(SlamSystem):
             "keep_final": self.keep_final,
         }
 
+    def identity(self) -> dict[str, Any]:
+        """``SlamSystem.identity`` plus the installed pyorbslam3 version and the SHA-256 of the
+        vocabulary and of a given settings file (hashed once per file version in a process:
+        the 145 MB ORBvoc.txt takes about 0.1 s)."""
+        import importlib.metadata
+        import os
+
+        from sal_adapters.cache_dir import user_cache_dir
+        from sal_wrappers.base import file_sha256
+        from sal_wrappers.vocabulary import BUILDER_VERSION, ENV_VARIABLE
+
+        try:
+            package: str | None = importlib.metadata.version("pyorbslam3")
+        except importlib.metadata.PackageNotFoundError:
+            package = None
+        # the vocabulary run() takes: the option, else ensure_vocabulary()'s order without building
+        vocabulary = self.vocabulary or os.environ.get(ENV_VARIABLE) or None
+        official = user_cache_dir("vocabulary") / "ORBvoc.txt"
+        if vocabulary is None and official.is_file():
+            vocabulary = str(official)
+        files: dict[str, str] = {"vocabulary": f"built by sal_wrappers.vocabulary b{BUILDER_VERSION}"}
+        for what, path in (("vocabulary", vocabulary), ("settings", self.settings)):
+            if path is not None:
+                try:
+                    files[what] = file_sha256(path)
+                except OSError as exc:
+                    raise SlamSystemError(f"orbslam3: cannot read the {what} file {path} ({exc.strerror or exc})") from None
+        return {**super().identity(), "pyorbslam3": package, "files": files}
+
     @property
     def pace_factor(self) -> float | None:
         """Speed factor of the pacing (1.0: the sensor rate), ``None`` when not paced."""

@@ -45,7 +45,7 @@ import numpy as np
 
 from sal_adapters import Sequence, Trajectory
 from sal_wrappers import vo_geometry as geo
-from sal_wrappers.base import RunResult, SlamSystem, SlamSystemError, TrackState
+from sal_wrappers.base import RunResult, SlamSystem, SlamSystemError, TrackState, file_sha256
 from sal_wrappers.prefetch import prefetched
 from sal_wrappers.vo_odometry import Odometry
 
@@ -69,6 +69,7 @@ class ReferenceVO(SlamSystem):
     name = "reference_vo"
     sensors = ("mono", "stereo", "rgbd")
     description = "Built-in deterministic visual odometry (ORB or KLT, PnP on depth, stereo or triangulated points)"
+    #: bump when a change of the VO code changes results (identity() also hashes source_files())
     version = 1
 
     def __init__(
@@ -106,6 +107,12 @@ class ReferenceVO(SlamSystem):
             "tracker": self.tracker,
             "max_lost": self.max_lost,
         }
+
+    def identity(self) -> dict[str, Any]:
+        """``SlamSystem.identity`` plus the OpenCV version and the SHA-256 of the VO's source
+        files (``source_files()``), so that an edit of the code is never served from the cache."""
+        sources = {path.name: file_sha256(path) for path in source_files()}
+        return {**super().identity(), "opencv": cv2.__version__, "sources": sources}
 
     def run(self, sequence: Sequence, workdir: Path, timeout: float | None = None) -> RunResult:
         mode = self.mode_for(sequence, self.mode)
@@ -189,6 +196,12 @@ class ReferenceVO(SlamSystem):
             log_tail="\n".join(lines[-15:]),
             info=info,
         )
+
+
+def source_files() -> list[Path]:
+    """The files whose code decides reference_vo's results: this module and ``vo_*.py``."""
+    here = Path(__file__).resolve()
+    return [here, *sorted(here.parent.glob("vo_*.py"))]
 
 
 def _decoded(sequence: Sequence, mode: str) -> Iterator[tuple[int, float, np.ndarray, np.ndarray | None, np.ndarray | None]]:
