@@ -231,6 +231,23 @@ def test_iso_at_or_below_the_base_iso_adds_nothing(iso: float) -> None:
 # -- sun_glare ----------------------------------------------------------------------------------------
 
 
+def all_sky(index: int, stream: str) -> np.ndarray:
+    """A depth lookup that says "sky" everywhere (0 = no depth): nothing hides the sun."""
+    return np.zeros((376, 1240), np.float32)
+
+
+def sky_of(image: np.ndarray) -> np.ndarray:
+    """An all-sky depth map (0 = no depth) of ``image``'s size."""
+    return np.zeros(image.shape[:2], np.float32)
+
+
+def glare_module(sequence: Sequence | None = None, depth=all_sky, **params):  # type: ignore[no-untyped-def]
+    """sun_glare set up on ``sequence`` (default: the synthetic street) with a depth lookup."""
+    module = create("sun_glare", **params)
+    module.setup(ModuleContext(sequence=sequence or urban(), seed=1, depth=depth))
+    return module
+
+
 def angles_deg(module, stream: str, height: int, width: int, index: int = 0) -> np.ndarray:  # type: ignore[no-untyped-def]
     camera = module.context.camera_for(stream)
     x = (np.arange(width) - camera.cx) / camera.fx
@@ -242,7 +259,7 @@ def angles_deg(module, stream: str, height: int, width: int, index: int = 0) -> 
 
 
 def test_veiling_glare_follows_the_stiles_holladay_law() -> None:
-    module = ready("sun_glare", sun_illuminance_klux=20.0, sun_azimuth_deg=10.0, sun_elevation_deg=5.0, veil_factor=1.0, ghost_reflectance=0.0)
+    module = glare_module(sun_illuminance_klux=20.0, sun_azimuth_deg=10.0, sun_elevation_deg=5.0, veil_factor=1.0, ghost_reflectance=0.0)
     height, width = 376, 1240
     glare = module.glare(0, "left", height, width) @ LUMA.astype(np.float32)
     theta = angles_deg(module, "left", height, width)
@@ -253,37 +270,39 @@ def test_veiling_glare_follows_the_stiles_holladay_law() -> None:
 
 
 def test_glare_is_brighter_closer_to_the_sun_on_the_image() -> None:
-    module = ready("sun_glare", sun_azimuth_deg=15.0, sun_elevation_deg=5.0)
+    module = glare_module(sun_azimuth_deg=15.0, sun_elevation_deg=5.0)
     image = flat(60, (376, 1240))
-    added = linear(module.apply(image, None, 0, "left")) - linear(image)
+    added = linear(module.apply(image, sky_of(image), 0, "left")) - linear(image)
     theta = angles_deg(module, "left", 376, 1240)
     near, middle, far = (added[(theta > lo) & (theta < hi)].mean() for lo, hi in ((10, 12), (20, 22), (35, 37)))
     assert near > middle > far > 0
 
 
 def test_stronger_sun_changes_the_image_more() -> None:
-    image = urban()[0].image
-    diffs = [np.abs(ready("sun_glare", sun_illuminance_klux=k).apply(image, None, 0, "left").astype(int) - image).mean() for k in (0.0, 5.0, 20.0, 60.0, 150.0)]
+    frame = urban()[0]
+    image, depth = frame.image, frame.depth  # the default sun (straight ahead, 8 deg up) is in the sky
+    diffs = [np.abs(glare_module(sun_illuminance_klux=k).apply(image, depth, 0, "left").astype(int) - image).mean() for k in (0.0, 5.0, 20.0, 60.0, 150.0)]
     assert diffs[0] == 0 and all(b > a for a, b in zip(diffs, diffs[1:])), diffs
 
 
 def test_sun_outside_the_view_still_veils_and_behind_the_camera_does_nothing() -> None:
     image = flat(60, (376, 1240))
-    out = ready("sun_glare", sun_azimuth_deg=70.0, sun_elevation_deg=5.0).apply(image, None, 0, "left")
+    out = glare_module(sun_azimuth_deg=70.0, sun_elevation_deg=5.0).apply(image, sky_of(image), 0, "left")
     added = linear(out) - linear(image)
     assert added.min() > 0, "every pixel gets veiling glare"
     assert added[:, -100:].mean() > 2 * added[:, :100].mean(), "more glare on the side of the sun"
     assert out.max() < 255, "no disc, no bloom and no ghosts with the sun 29 deg outside the view"
-    behind = ready("sun_glare", sun_azimuth_deg=120.0).apply(image, None, 0, "left")
+    behind = glare_module(sun_azimuth_deg=120.0).apply(image, sky_of(image), 0, "left")
     np.testing.assert_array_equal(behind, image)
 
 
 def test_sun_disc_saturates_where_the_sun_projects_and_ghosts_lie_on_the_line_through_the_centre() -> None:
-    module = ready("sun_glare", sun_azimuth_deg=20.0, sun_elevation_deg=8.0, veil_factor=0.0)
+    module = glare_module(sun_azimuth_deg=20.0, sun_elevation_deg=8.0, veil_factor=0.0)
     camera = urban().camera
     d = sun_direction(20.0, 8.0)
     sun = np.array([camera.cx + camera.fx * d[0] / d[2], camera.cy + camera.fy * d[1] / d[2]])
-    out = module.apply(flat(20, (376, 1240)), None, 0, "left")
+    image = flat(20, (376, 1240))
+    out = module.apply(image, sky_of(image), 0, "left")
     assert np.all(out[int(round(sun[1])), int(round(sun[0]))] == 255)
     glare = module.glare(0, "left", 376, 1240).sum(axis=2)
     centre = np.array([camera.cx, camera.cy])
@@ -296,9 +315,9 @@ def test_sun_disc_saturates_where_the_sun_projects_and_ghosts_lie_on_the_line_th
 
 def test_glare_is_static_over_frames_unless_it_follows_the_pose(kitti: Sequence) -> None:
     image = urban()[0].image
-    module = ready("sun_glare")
-    np.testing.assert_array_equal(module.apply(image, None, 0, "left"), module.apply(image, None, 1, "left"))
-    follow = ready("sun_glare", sequence=kitti, sun_azimuth_deg=0.0, sun_elevation_deg=5.0, follow_pose=True)
+    module = glare_module()
+    np.testing.assert_array_equal(module.apply(image, sky_of(image), 0, "left"), module.apply(image, sky_of(image), 1, "left"))
+    follow = glare_module(sequence=kitti, sun_azimuth_deg=0.0, sun_elevation_deg=5.0, follow_pose=True)
     yaw = math.degrees(math.atan2(kitti.groundtruth.matrices[40][0, 2], kitti.groundtruth.matrices[40][2, 2]))
     d = follow.direction(40, "left")
     assert math.degrees(math.atan2(d[0], d[2])) == pytest.approx(-yaw, abs=0.5), "the sun stays put while the car turns"
@@ -307,7 +326,7 @@ def test_glare_is_static_over_frames_unless_it_follows_the_pose(kitti: Sequence)
 
 def test_follow_pose_needs_ground_truth(euroc: Sequence) -> None:
     with pytest.raises(ModuleError, match="follow_pose needs per-frame ground-truth poses"):
-        ready("sun_glare", sequence=euroc, follow_pose=True)
+        glare_module(sequence=euroc, follow_pose=True)
 
 
 # -- real frames --------------------------------------------------------------------------------------
@@ -319,14 +338,17 @@ def test_light_modules_on_real_grey_frames(kind: str, kitti: Sequence, euroc: Se
     clean = seq[1].image
     night = perturb(seq, create("night", illuminance_lux=2.0), seed=1)[1]
     iso = perturb(seq, create("sensor_noise", iso=6400.0), seed=1)[1]
-    glare = perturb(seq, create("sun_glare", sun_azimuth_deg=-10.0), seed=1)[1]
-    for out in (night, iso, glare):
-        assert out.image.shape == clean.shape and out.image.dtype == np.uint8
-        assert np.array_equal(out.image[..., 0], out.image[..., 2]), "a grey camera stays grey"
+    glare = glare_module(sequence=seq, sun_azimuth_deg=-10.0)  # all sky: the grey path of the glare
+    glare_left = glare.apply(clean, sky_of(clean), seq[1].index, "left")
+    for out in (night.image, iso.image, glare_left):
+        assert out.shape == clean.shape and out.dtype == np.uint8
+        assert np.array_equal(out[..., 0], out[..., 2]), "a grey camera stays grey"
     assert linear(night.image).mean() < 0.25 * linear(clean).mean()
     assert 2.0 < np.abs(iso.image.astype(int) - clean).mean() < 20.0
-    assert linear(glare.image).mean() > linear(clean).mean() + 0.05
+    assert linear(glare_left).mean() > linear(clean).mean() + 0.05
     if seq.sensor == "stereo":
         right = seq[1].right
         assert np.mean((night.right != right)) > 0.3 and not np.array_equal(night.image, night.right)
-        assert linear(glare.right).mean() > linear(right).mean() + 0.05
+        glare_right = glare.apply(right, sky_of(right), seq[1].index, "right")
+        assert np.array_equal(glare_right[..., 0], glare_right[..., 2])
+        assert linear(glare_right).mean() > linear(right).mean() + 0.05
