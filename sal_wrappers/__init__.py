@@ -12,8 +12,9 @@ from typing import Any
 
 from sal_adapters.plugins import EntryPointRegistry
 from sal_wrappers.base import RunResult, SlamSystem, SlamSystemError, TrackState
+from sal_wrappers.load import machine_load, oversubscribed_warning
 
-__all__ = ["RunResult", "SYSTEMS", "SlamSystem", "SlamSystemError", "TrackState", "create"]
+__all__ = ["RunResult", "SYSTEMS", "SlamSystem", "SlamSystemError", "TrackState", "create", "machine_load", "oversubscribed_warning"]
 
 #: SLAM systems by name; built-ins and plug-ins register in ``sal.systems``.
 SYSTEMS: EntryPointRegistry[type[SlamSystem]] = EntryPointRegistry("sal.systems", "SLAM system")

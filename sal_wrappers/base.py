@@ -68,7 +68,15 @@ class RunResult:
             when it ran to the end.
         log_path: the run's log file (the system's own output), when there is one.
         log_tail: the last lines of that log (kept for messages when the file is gone).
-        info: anything else the system reports (settings file, vocabulary, options).
+        info: anything else the system reports (settings file, vocabulary, options);
+            ``info["attempts"]``: every attempt of a run that was re-run because it fell behind
+            the sensor clock (``pace``, ``tracked``, ``frames``, ``wall_time_s``, ``failure``,
+            ``fell_behind``, ``load``), the last one being this result.
+        load: whether the run kept up with the sensor clock (``sal_wrappers.load.load_figures``:
+            hand-over lateness, tracking time against the frame period, CPU time, load average);
+            empty when not measured.
+        fell_behind: the run (its last attempt) still fell behind the sensor clock: the machine
+            was starved, so its tracking says little about the system.
     """
 
     system: str
@@ -87,6 +95,8 @@ class RunResult:
     log_path: Path | None = None
     log_tail: str = ""
     info: dict[str, Any] = field(default_factory=dict)
+    load: dict[str, Any] = field(default_factory=dict)
+    fell_behind: bool = False
 
     def __post_init__(self) -> None:
         t = np.asarray(self.timestamps, dtype=np.float64).reshape(-1)
@@ -123,9 +133,17 @@ class RunResult:
         return int(hits[0]) if len(hits) else None
 
     def summary(self) -> str:
-        """One line: system, frames tracked, maps, time, failure."""
+        """One line: system, frames tracked, maps, time, failure, and whether the run fell
+        behind the sensor clock (and was re-paced)."""
         text = f"{self.system} on {self.sequence} ({self.sensor}): {self.tracked}/{self.frames} frames tracked"
         text += f", {self.maps} map(s), {self.wall_time_s:.1f} s, scored trajectory: {self.scored}"
+        attempts = self.info.get("attempts") or []
+        pace = self.load.get("pace")
+        if self.fell_behind:
+            again = f" even re-paced at {pace:g}x ({len(attempts)} attempts)" if len(attempts) > 1 else ""
+            text += f"; STARVED: fell behind the sensor clock ({self.load.get('fell_behind_reason')}){again}"
+        elif len(attempts) > 1:
+            text += f"; fell behind the sensor clock ({attempts[0]['load'].get('fell_behind_reason')}); re-paced at {pace:g}x"
         return text + (f"; FAILED: {self.failure}" if self.failure else "")
 
     # -- persistence (cache entries, child-process results) ------------------------------------
@@ -154,6 +172,8 @@ class RunResult:
             "log_path": None if self.log_path is None else str(self.log_path),
             "log_tail": self.log_tail,
             "info": self.info,
+            "load": self.load,
+            "fell_behind": self.fell_behind,
         }
 
     @classmethod

@@ -35,12 +35,23 @@ status, signal, timeout. The child writes its per-frame
 records about once a second and before shutting down and saving, so a crash in saving or a
 timeout still leaves the per-frame states and poses; ``failure`` then says what was kept and
 ``info["partial"]`` is ``True``.
+
+Machine load (``sal_wrappers.load``): the child records when each frame was handed over, its
+CPU time and the load average, and ``RunResult.load`` says whether the run kept up with the
+sensor clock. A paced run that fell behind and ran to the end is run again, slower in
+proportion (``repace``: the rate the machine achieved), up to ``load_retries`` times; the last
+attempt is the result, ``info["attempts"]`` lists every attempt (pace, frames tracked, wall
+time, load figures) and ``RunResult.fell_behind`` is ``True`` only when the last attempt still
+fell behind: its tracking reflects a starved machine, not the system (``failure``, when set,
+says so too). Earlier attempts' logs are kept as ``orbslam3.attempt<N>.log``.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.util
 import math
+import os
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -50,7 +61,8 @@ import numpy as np
 
 from sal_adapters import Sequence, Trajectory
 from sal_wrappers.base import RunResult, SlamSystem, SlamSystemError, TrackState
-from sal_wrappers.child import run_child, write_result
+from sal_wrappers.child import ChildOutcome, run_child, write_result
+from sal_wrappers.load import load_figures, process_usage, repace
 from sal_wrappers.orbslam3_settings import OrbParameters, write_settings
 from sal_wrappers.prefetch import prefetched
 
@@ -181,12 +193,17 @@ class OrbSlam3(SlamSystem):
         th_depth: ``Stereo.ThDepth``: close/far point threshold in baselines (stereo, RGB-D).
         settings: a settings YAML to use as it is instead of the generated one.
         keep_final: also save ORB-SLAM3's own final trajectory (``final_trajectory``).
+        load_retries: re-runs (0..5) of a paced run that fell behind the sensor clock, each
+            slower in proportion; see the module text.
     """
 
     name = "orbslam3"
     sensors = ("mono", "stereo", "rgbd")
     description = "ORB-SLAM3 (pyorbslam3 0.1.1): monocular, stereo or RGB-D visual SLAM, run in a child process"
     version = 1
+    #: test hook, not an option: seconds the child sleeps after each tracking call (simulates
+    #: a machine that cannot keep up with the sensor clock)
+    _stall_s: float = 0.0
 
     def __init__(
         self,
@@ -202,6 +219,7 @@ class OrbSlam3(SlamSystem):
         th_depth: float = 40.0,
         settings: str | Path | None = None,
         keep_final: bool = True,
+        load_retries: int = 2,
     ):
         if mode is not None and mode not in self.sensors:
             raise SlamSystemError(f"orbslam3: option mode={mode!r} is not allowed; use one of {', '.join(self.sensors)} or None (the sequence's sensor)")
@@ -221,6 +239,7 @@ class OrbSlam3(SlamSystem):
         if not isinstance(keep_final, (bool, np.bool_)):
             raise SlamSystemError(f"orbslam3: option keep_final={keep_final!r} is not allowed; use True or False")
         self.keep_final = bool(keep_final)
+        self.load_retries = _check_int("load_retries", load_retries, 0, 5)
         if importlib.util.find_spec("pyorbslam3") is None:
             raise SlamSystemError("orbslam3 needs the pyorbslam3 package: pip install 'pytest-sal[orbslam3]'")
 
@@ -237,6 +256,7 @@ class OrbSlam3(SlamSystem):
             "th_depth": self.th_depth,
             "settings": self.settings,
             "keep_final": self.keep_final,
+            "load_retries": self.load_retries,
         }
 
     def identity(self) -> dict[str, Any]:
@@ -279,7 +299,7 @@ class OrbSlam3(SlamSystem):
         """Run ORB-SLAM3 on ``sequence`` in a child process (see the module text); files go to
         ``workdir``: ``orbslam3_settings.yaml``, ``orbslam3.log``, ``final_trajectory_euroc.txt``.
 
-        ``timeout`` (s) covers the whole child run, vocabulary loading included. Raises
+        ``timeout`` (s) covers each child run (attempt), vocabulary loading included. Raises
         ``SlamSystemError`` when the sequence cannot run in the mode, and the vocabulary
         module's error when the default vocabulary cannot be built; everything ORB-SLAM3 does
         (exit, crash, hang, lost track) comes back in the result."""
@@ -306,10 +326,26 @@ class OrbSlam3(SlamSystem):
             "pace": self.pace_factor,
             "final_path": str(final_path) if self.keep_final else None,
         }
-        outcome = run_child("sal_wrappers.orbslam3:_track", header, prefetched(_frames(sequence, mode)), workdir, timeout, log_name="orbslam3.log")
-        return self._result(sequence, mode, outcome, header, final_path)
+        if self._stall_s:
+            header["stall_s"] = float(self._stall_s)
+        attempts: list[dict[str, Any]] = []
+        while True:
+            outcome = run_child("sal_wrappers.orbslam3:_track", header, prefetched(_frames(sequence, mode)), workdir, timeout, log_name="orbslam3.log")
+            result = self._result(sequence, mode, outcome, header, final_path)
+            attempts.append(_attempt(result))
+            load = result.load
+            if not load.get("fell_behind") or outcome.failure is not None or len(attempts) > self.load_retries:
+                break
+            outcome.log_path.replace(workdir / f"orbslam3.attempt{len(attempts)}.log")
+            header = {**header, "pace": repace(float(header["pace"]), load["sensor_s"], load["loop_s"])}
+        fell_behind = bool(result.load.get("fell_behind"))
+        failure = result.failure
+        if fell_behind and failure is not None:
+            paced = f" at {header['pace']:g}x" if len(attempts) > 1 else ""
+            failure += f"; the machine could not keep up: the run fell behind the sensor clock{paced} ({result.load['fell_behind_reason']})"
+        return dataclasses.replace(result, fell_behind=fell_behind, failure=failure, info={**result.info, "attempts": attempts})
 
-    def _result(self, sequence: Sequence, mode: str, outcome: Any, header: dict[str, Any], final_path: Path) -> RunResult:
+    def _result(self, sequence: Sequence, mode: str, outcome: ChildOutcome, header: dict[str, Any], final_path: Path) -> RunResult:
         data = outcome.result or {}
         timestamps = sequence.timestamps
         n = len(timestamps)
@@ -343,6 +379,8 @@ class OrbSlam3(SlamSystem):
             if partial:
                 failure += f"; the per-frame results of {len(reported)} of {n} frames are kept"
         track_times = np.asarray(data.get("track_times", []), dtype=np.float64)
+        given = np.asarray(data.get("given", []), dtype=np.float64)
+        load = load_figures(timestamps[: len(given)], given, track_times, header.get("pace"), data.get("usage")) if len(given) else {}
         counts: dict[str, int] = {}
         for s in reported:
             counts[_NAMES.get(s, str(s))] = counts.get(_NAMES.get(s, str(s)), 0) + 1
@@ -351,7 +389,7 @@ class OrbSlam3(SlamSystem):
             "settings_generated": self.settings is None,
             "vocabulary": header["vocabulary"],
             "features": self.features,
-            "pace": self.pace_factor,
+            "pace": header.get("pace"),
             "options": self.options(),
             "load_time_s": data.get("load_time_s"),
             "loop_time_s": data.get("loop_time_s"),
@@ -383,7 +421,23 @@ class OrbSlam3(SlamSystem):
             log_path=outcome.log_path,
             log_tail=outcome.log_tail,
             info=info,
+            load=load,
+            fell_behind=bool(load.get("fell_behind")),
         )
+
+
+def _attempt(result: RunResult) -> dict[str, Any]:
+    """One attempt for ``info["attempts"]``: pace, frames tracked, wall time (s), failure, load figures."""
+    return {
+        "pace": result.info.get("pace"),
+        "tracked": result.tracked,
+        "frames": result.frames,
+        "maps": result.maps,
+        "wall_time_s": round(result.wall_time_s, 3),
+        "failure": result.failure,
+        "fell_behind": bool(result.load.get("fell_behind")),
+        "load": result.load,
+    }
 
 
 def _grey(image: np.ndarray) -> np.ndarray:
@@ -413,7 +467,7 @@ def _track(header: dict[str, Any], frames: Iterator[dict[str, Any]], result_path
     before each step that may crash."""
     import pyorbslam3
 
-    record: dict[str, Any] = {"phase": "loading", "raw_states": [], "poses": [], "track_times": [], "points": [], "final_saved": False}
+    record: dict[str, Any] = {"phase": "loading", "raw_states": [], "poses": [], "track_times": [], "given": [], "points": [], "final_saved": False}
     write_result(result_path, record)
     start = time.perf_counter()
     sensor = getattr(pyorbslam3.Sensor, _SENSORS[header["sensor"]])
@@ -423,7 +477,23 @@ def _track(header: dict[str, Any], frames: Iterator[dict[str, Any]], result_path
     write_result(result_path, record)
     pace = header.get("pace")
     mode = header["sensor"]
+    stall = float(header.get("stall_s") or 0.0)
     previous: tuple[float, float] | None = None  # (frame time, wall time it was given)
+    before, loadavg_start = process_usage(), [round(v, 2) for v in os.getloadavg()]
+
+    def usage() -> dict[str, Any]:
+        """CPU time (s) and involuntary switches of the loop so far, load averages, cores."""
+        now = process_usage()
+        return {
+            "cpu_s": round(now["cpu_s"] - before["cpu_s"], 3),
+            "child_cpu_s": round(now["cpu_s"], 3),
+            "loop_wall_s": round(time.perf_counter() - loop_start, 3),
+            "involuntary_switches": int(now["involuntary_switches"] - before["involuntary_switches"]),
+            "loadavg_start": loadavg_start,
+            "loadavg_end": [round(v, 2) for v in os.getloadavg()],
+            "cpus": os.cpu_count(),
+        }
+
     last_flush = loop_start = time.perf_counter()
     for frame in frames:
         t = float(frame["timestamp"])
@@ -439,15 +509,20 @@ def _track(header: dict[str, Any], frames: Iterator[dict[str, Any]], result_path
         else:
             result = slam.track_monocular(frame["image"], t)
         record["track_times"].append(time.perf_counter() - given)
+        record["given"].append(given - loop_start)
         previous = (t, given)
+        if stall:
+            time.sleep(stall)
         state = int(result.state)
         record["raw_states"].append(state)
         record["poses"].append(np.asarray(result.pose_wc, dtype=np.float64).ravel().tolist() if state in _OK else None)
         record["points"].append(int(result.num_tracked_points))
         if time.perf_counter() - last_flush > _FLUSH_INTERVAL_S:
+            record["usage"] = usage()
             write_result(result_path, record)
             last_flush = time.perf_counter()
     record["loop_time_s"] = time.perf_counter() - loop_start  # tracking and waiting for the sensor clock
+    record["usage"] = usage()
     record["phase"] = "shutdown"
     write_result(result_path, record)
     slam.shutdown()

@@ -36,7 +36,9 @@ pytest.importorskip("pyorbslam3")
 from sal_adapters import Camera, Trajectory  # noqa: E402
 from sal_adapters.datasets import open_dataset  # noqa: E402
 from sal_wrappers import RunResult, SlamSystemError, TrackState, create  # noqa: E402
+from sal_wrappers import orbslam3 as orbslam3_module  # noqa: E402
 from sal_wrappers.child import ChildOutcome  # noqa: E402
+from sal_wrappers.load import repace  # noqa: E402
 from sal_wrappers.orbslam3 import ORB_STATES, OrbSlam3, map_states, read_final_trajectory, segment_ids  # noqa: E402
 from sal_wrappers.orbslam3_settings import (  # noqa: E402
     VIEWER_KEYS,
@@ -226,6 +228,7 @@ def test_create_and_options() -> None:
     assert system.pace_factor == 1.0
     assert create("orbslam3", pace=2.5).pace_factor == 2.5
     assert create("orbslam3", pace=False).pace_factor is None
+    assert options["load_retries"] == 2 and create("orbslam3", load_retries=0).load_retries == 0
 
 
 @pytest.mark.parametrize(
@@ -245,6 +248,8 @@ def test_create_and_options() -> None:
         ("vocabulary", "/nonexistent/voc.txt"),
         ("settings", "/nonexistent/settings.yaml"),
         ("keep_final", "yes"),
+        ("load_retries", -1),
+        ("load_retries", 6),
     ],
 )
 def test_bad_option_names_option(option: str, value: object) -> None:
@@ -312,6 +317,81 @@ def test_crash_while_saving_keeps_per_frame_results(tmp_path: Path) -> None:
     RunResult.from_json(result.to_json())  # JSON-ready
 
 
+# -- machine load: re-pacing a run that fell behind (fake child) ------------------------------
+def _fake_child(steps_s: list[float], failure: str | None = None):
+    """A ``run_child`` stand-in whose n-th call hands frames over every ``steps_s[n]`` s (every
+    frame tracked); it records the headers it was given."""
+    headers: list[dict] = []
+
+    def run_child(entry, header, frames, workdir, timeout, log_name="run.log"):  # noqa: ANN001, ANN202
+        step = steps_s[len(headers)]
+        headers.append(dict(header))
+        n = 30
+        log = Path(workdir) / log_name
+        log.write_text(f"attempt {len(headers)}\n")
+        record = {
+            "phase": "done",
+            "raw_states": [OK] * n,
+            "poses": [np.eye(4).ravel().tolist()] * n,
+            "track_times": [0.04] * n,
+            "given": (np.arange(n) * step).tolist(),
+            "usage": {"cpu_s": 1.0, "loop_wall_s": n * step},
+            "final_saved": False,
+        }
+        return ChildOutcome(record, 0 if failure is None else -11, failure, 3.0 + n * step, log, "")
+
+    return run_child, headers
+
+
+def _fake_run(monkeypatch: pytest.MonkeyPatch, tmp_path: Path, steps_s: list[float], failure: str | None = None, **options):
+    run_child, headers = _fake_child(steps_s, failure)
+    monkeypatch.setattr(orbslam3_module, "run_child", run_child)
+    tmp_path.mkdir(parents=True, exist_ok=True)
+    vocabulary = tmp_path / "voc.txt"
+    vocabulary.write_text("unused")
+    sequence = open_dataset("synthetic", scene="indoor", frames=30, sensor="mono")  # 30 Hz: 33 ms period
+    result = create("orbslam3", vocabulary=vocabulary, keep_final=False, **options).run(sequence, tmp_path / "run")
+    return result, headers
+
+
+def test_run_that_fell_behind_is_re_paced_and_recorded(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """30 Hz frames handed over every 80 ms: fell behind; re-run just below the achieved rate
+    (0.9 x 0.42x), kept up."""
+    result, headers = _fake_run(monkeypatch, tmp_path, [0.08, 0.08])
+    assert [h["pace"] for h in headers] == [1.0, repace(1.0, 29 / 30, 29 * 0.08)] == [1.0, 0.37]
+    attempts = result.info["attempts"]
+    assert [a["fell_behind"] for a in attempts] == [True, False] and [a["pace"] for a in attempts] == [1.0, 0.37]
+    assert attempts[0]["load"]["late_frames"] == 29 and attempts[0]["tracked"] == 30
+    assert not result.fell_behind and result.load["pace"] == 0.37 and result.info["pace"] == 0.37
+    assert result.failure is None
+    assert "; fell behind the sensor clock (29 of 30 frames late by > 17 ms" in result.summary()
+    assert result.summary().endswith("re-paced at 0.37x")
+    assert (tmp_path / "run" / "orbslam3.attempt1.log").read_text() == "attempt 1\n"
+    assert RunResult.from_json(result.to_json()).info["attempts"][1]["pace"] == 0.37
+
+
+def test_run_that_keeps_falling_behind_is_marked_starved(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """Slower at every attempt: after load_retries re-runs the result is kept, marked fell_behind."""
+    result, headers = _fake_run(monkeypatch, tmp_path, [0.08, 0.3, 1.0], load_retries=2)
+    assert len(headers) == 3 and headers[1]["pace"] == 0.37 and headers[2]["pace"] < headers[1]["pace"]
+    assert result.fell_behind and result.load["fell_behind"] and result.tracked == 30
+    assert [a["fell_behind"] for a in result.info["attempts"]] == [True, True, True]
+    assert "STARVED: fell behind the sensor clock" in result.summary() and "(3 attempts)" in result.summary()
+
+
+def test_run_that_fell_behind_without_retries_or_after_a_crash(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    result, headers = _fake_run(monkeypatch, tmp_path / "a", [0.08], load_retries=0)
+    assert len(headers) == 1 and result.fell_behind and len(result.info["attempts"]) == 1
+    assert "STARVED" in result.summary()
+    # a crashed child is not re-run; its failure says the machine could not keep up
+    result, headers = _fake_run(monkeypatch, tmp_path / "b", [0.08], failure="killed by SIGSEGV (segmentation fault)")
+    assert len(headers) == 1 and result.fell_behind
+    assert "; the machine could not keep up: the run fell behind the sensor clock (29 of 30 frames late" in result.failure
+    # unpaced: never re-run
+    result, headers = _fake_run(monkeypatch, tmp_path / "c", [0.08], pace=False)
+    assert len(headers) == 1 and not result.fell_behind and not result.load["paced"]
+
+
 # -- real ORB-SLAM3 runs ---------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def urban_stereo(vocabulary: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[RunResult, object]:
@@ -372,7 +452,8 @@ def test_orbslam3_real_stereo_synthetic_urban_result_fields(urban_stereo: tuple[
     assert result.wall_time_s >= 0.99 * (len(sequence) - 1) / sequence.fps  # paced at 10 Hz: >= 9.8 s
     info = result.info
     assert info["settings_generated"] and Path(info["settings"]).is_file()
-    assert info["features"] == 2000 and info["pace"] == 1.0 and info["phase"] == "done"
+    assert info["features"] == 2000 and info["phase"] == "done"
+    assert info["attempts"][0]["pace"] == 1.0 and info["pace"] == info["attempts"][-1]["pace"]  # re-paced when the machine was busy
     assert info["load_time_s"] > 0 and info["track_ms_mean"] > 0
     assert result.log_path.is_file() and "Vocabulary loaded" in result.log_path.read_text()
     RunResult.from_json(result.to_json())
@@ -413,6 +494,45 @@ def test_orbslam3_real_mono_kitti07(kitti_mono: tuple[RunResult, object]) -> Non
     assert matched == len(result.trajectory)
     assert error <= 0.40, _report(result, error)  # measured 0.24-0.27 m over 78 m
     assert result.wall_time_s >= 13.0  # paced at ~9.6 Hz: 139 frame periods = 14.4 s
+
+
+def test_orbslam3_real_mono_kitti07_load_figures(kitti_mono: tuple[RunResult, object]) -> None:
+    """Every real run says whether it kept up with the sensor clock; a re-paced one says so."""
+    result, _ = kitti_mono
+    load, attempts = result.load, result.info["attempts"]
+    assert load["paced"] and load["frames"] == 140 and load["sensor_s"] * load["pace"] == pytest.approx(139 / 9.6, rel=0.02)
+    assert load["cpu_s"] > 1.0 and 0 < load["cpu_per_wall"] < 8 and len(load["loadavg_end"]) == 3 and load["cpus"] >= 1
+    assert attempts[-1]["pace"] == load["pace"] and attempts[0]["pace"] == 1.0
+    assert result.fell_behind == load["fell_behind"]
+    if len(attempts) > 1:  # the machine was busy: the first attempt fell behind
+        assert attempts[0]["fell_behind"]
+        assert result.fell_behind or "re-paced" in result.summary(), result.summary()
+    else:
+        assert load["late_share"] <= 0.10 and load["overrun"] <= 0.25  # quiet machine: 0/140 late, +0 %
+
+
+def test_orbslam3_real_starved_run_is_re_paced(vocabulary: Path, shared_data: Path, tmp_path: Path) -> None:
+    """A deterministic starved machine: the child sleeps 150 ms after every tracking call, so
+    frames 104 ms apart are handed over about 190 ms apart (first attempt: every frame late by
+    more than half a period); the re-run just below the achieved rate (about 0.5x) gives the
+    same time per frame, which the sensor clock now allows."""
+    sequence = open_dataset("kitti", shared_data / "kitti" / "sequences" / "07", max_frames=60)
+    system = create("orbslam3", vocabulary=vocabulary, load_retries=2)
+    system._stall_s = 0.15
+    result = system.run(sequence, tmp_path, timeout=300)
+    attempts = result.info["attempts"]
+    first = attempts[0]["load"]
+    assert attempts[0]["pace"] == 1.0 and attempts[0]["fell_behind"], first
+    assert first["late_share"] > 0.5 and first["lateness_ms_median"] > 52, first
+    assert len(attempts) >= 2, result.summary()
+    second = attempts[1]
+    assert second["pace"] == repace(1.0, first["sensor_s"], first["loop_s"]) and 0.05 <= second["pace"] < 0.6, second["pace"]
+    assert second["load"]["period_ms"] == pytest.approx(first["period_ms"] / second["pace"], rel=1e-3)
+    assert second["load"]["late_share"] < first["late_share"], second["load"]
+    assert result.load["pace"] == attempts[-1]["pace"] and result.fell_behind == attempts[-1]["fell_behind"]
+    assert (tmp_path / "orbslam3.attempt1.log").is_file() and result.ok, result.failure
+    summary = result.summary()
+    assert ("STARVED" in summary) if result.fell_behind else summary.endswith(f"re-paced at {result.load['pace']:g}x"), summary
 
 
 def test_orbslam3_real_mono_kitti07_final_trajectory(kitti_mono: tuple[RunResult, object]) -> None:
