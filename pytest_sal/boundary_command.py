@@ -21,6 +21,7 @@ import argparse
 import json
 import math
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
@@ -68,7 +69,7 @@ def add_boundary_commands(commands: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     cmd.add_argument("config", type=Path, metavar="CONFIG", help="experiment YAML with an enabled robustness_boundary block")
-    add_slam_arguments(cmd, "runs per trial; metrics are their median")
+    add_slam_arguments(cmd, "the most runs per trial; runs vote until one verdict leads by 2, metrics are their median", default_runs=None)
     add_cache_arguments(cmd, "trial cache", no_cache="run every trial, read and store nothing in the cache")
     cmd.set_defaults(run=_run)
 
@@ -78,26 +79,24 @@ def linear_sweep_trials(lower: float, upper: float, tolerance: float) -> int:
     return math.ceil((upper - lower) / tolerance - 1e-9) + 1
 
 
-def _print_progress(runner: Any, out: TextIO) -> None:
-    """Make ``runner.evaluate`` print one line per trial as it finishes."""
-    evaluate = runner.evaluate
+def _progress_printer(unit: str, out: TextIO) -> Callable[[Trial], None]:
+    """A ``TrialRunner.progress`` callback printing one line per trial as it finishes (again
+    when a confirmation adds runs to it)."""
     count = 0
 
-    def evaluate_and_print(value: float, attempt: int = 0) -> Trial:
+    def show(trial: Trial) -> None:
         nonlocal count
-        trial = evaluate(value, attempt)
         count += 1
-        print(f"  trial {count:2d}  {_trial_line(trial, runner.ref.unit, repeat=attempt > 0)}", file=out, flush=True)
-        return trial
+        print(f"  step {count:2d}  {_trial_line(trial, unit)}", file=out, flush=True)
 
-    runner.evaluate = evaluate_and_print
+    return show
 
 
-def _trial_line(trial: Trial, unit: str, repeat: bool = False) -> str:
+def _trial_line(trial: Trial, unit: str) -> str:
     ate, rate = trial.metrics.get("ate_rmse"), trial.metrics.get("tracking_rate")
     ate_text = "-" if ate is None else f"{ate:.4g} m"
     rate_text = "-" if rate is None else f"{100 * rate:.0f}%"
-    notes = [n for n, on in (("cached", trial.cached), ("repeat of the edge", repeat)) if on]
+    notes = [n for n, on in (("cached", trial.cached), (trial.votes(), len(trial.runs) > 1)) if on]
     note = f"  ({', '.join(notes)})" if notes else ""
     failed = f"  failed: {', '.join(trial.failed)}" if trial.failed else ""
     value = f"{trial.value:g}{' ' + unit if unit else ''}"
@@ -118,7 +117,7 @@ def run_boundary(
     slam: str,
     *,
     slam_options: dict[str, Any] | None = None,
-    runs: int = 1,
+    runs: int | None = None,
     timeout: float | None = 600.0,
     cache_dir: Path | None = None,
     use_cache: bool = True,
@@ -163,15 +162,15 @@ def run_boundary(
     folder = config.output_dir() / "robustness_boundary" / system.name / rb.name
     cache = command_cache(cache_dir) if use_cache else None
     runner = TrialRunner(
-        clean, ref, system, requirement, runs=runs, seed=config.experiment.seed, cache=cache, workdir=folder / "runs", timeout=timeout
+        clean, ref, system, requirement, runs=runs, seed=config.experiment.seed, cache=cache, workdir=folder / "runs", timeout=timeout,
+        progress=_progress_printer(ref.unit, out),
     )
-    _print_progress(runner, out)
     unit = ref.unit
     unit_text = f" {unit}" if unit else ""
     sweep = linear_sweep_trials(rb.lower_bound, rb.upper_bound, rb.tolerance)
     print(f"boundary    {rb.name}: {ref.label} in {rb.lower_bound:g} .. {rb.upper_bound:g}{unit_text} (gets worse {worse}), "
           f"tolerance {rb.tolerance:g}{unit_text}, max_iters {rb.max_iters}", file=out)
-    print(f"system      {system.name} {json.dumps(system.options(), sort_keys=True)}, runs {runs}", file=out)
+    print(f"system      {system.name} {json.dumps(system.options(), sort_keys=True)}, up to {runner.policy.max_runs} run(s) per trial", file=out)
     print(f"dataset     {config.dataset.type} {clean.name}: {len(clean)} frames, {clean.sensor}", file=out)
     print(f"requirement {requirement}", file=out)
     test_id = f"sal boundary {config.experiment.name}/{rb.name}"
@@ -183,7 +182,8 @@ def run_boundary(
     path.write_text(json.dumps(summary, indent=2) + "\n")
     cached = outcome.cached_trials
     print(f"boundary    {ref.label} {outcome.boundary.text()} ({outcome.termination}); "
-          f"{len(outcome.trials)} trials ({cached} cached) vs {sweep} for a linear sweep at {rb.tolerance:g}{unit_text} steps", file=out)
+          f"{len(outcome.trials)} trials, {outcome.runs} runs ({cached} trials cached) vs {sweep} for a linear sweep at {rb.tolerance:g}{unit_text} steps; "
+          f"{outcome.confidence()}", file=out)
     print(f"wrote {path}\nwrote {plot}", file=out)
     return summary
 
@@ -215,6 +215,8 @@ def _summary(outcome: Outcome, config: Any, rb: Any, ref: Any, module_type: str,
         "termination": outcome.termination,
         "contradictions": outcome.contradictions,
         "trials_used": len(outcome.trials),
+        "runs_used": outcome.runs,
+        "confidence": outcome.confidence(),
         "linear_sweep_trials": sweep,
         "trials": [
             {
@@ -223,7 +225,8 @@ def _summary(outcome: Outcome, config: Any, rb: Any, ref: Any, module_type: str,
                 "metrics": t.metrics,
                 "failed": t.failed,
                 "cached": t.cached,
-                "repeat": t.repeat,
+                "runs": len(t.runs),
+                "votes": t.votes(),
                 "wall_time_s": round(t.wall_time_s, 4),
             }
             for t in outcome.trials

@@ -324,7 +324,7 @@ def _trials_table(trials: list[Any], unit: str) -> str:
     rows = []
     for i, t in enumerate(t for t in trials if isinstance(t, dict)):
         m = t.get("metrics") or {}
-        notes = [x for x, on in (("cached", t.get("cached")), ("repeat", t.get("repeat"))) if on]
+        notes = [x for x, on in (("cached", t.get("cached")), (t.get("votes"), t.get("votes"))) if on]
         failed = "; ".join(t.get("failed") or []) + "".join(f" ({why})" for why in m.get("failures") or [])  # why a metric is missing
         cells = [str(i + 1), _value(t.get("value")), str(t.get("verdict", "?")), _fmt(m.get("ate_rmse"), ".4f"), _fmt(m.get("tracking_rate"), ".0%"), ", ".join(notes), failed]
         numeric = {0, 1, 3, 4}

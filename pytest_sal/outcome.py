@@ -2,7 +2,7 @@
 
 ``Outcome`` is JSON-ready (``to_dict`` / ``from_dict``): it travels from xdist workers to the
 controller on the test report, goes into the history store, the reports and JUnit XML.
-Values are in the search unit of the parameter (``%`` for ``frame_drop.drop_rate``).
+Values are in the parameter's declared unit (what ``sal modules`` prints: lx, ISO, m, ...).
 """
 
 from __future__ import annotations
@@ -15,19 +15,19 @@ __all__ = ["Boundary", "Outcome", "Trial"]
 
 @dataclass
 class Trial:
-    """One severity evaluated.
+    """One severity evaluated by one or more runs.
 
     Attributes:
-        value: the searched parameter's value (search unit).
-        passed: every criterion held (on the metrics aggregated over the runs).
+        value: the searched parameter's value (its declared unit).
+        passed: the majority of runs met every criterion (a tie fails).
         metrics: aggregated metrics (median over runs): ``ate_rmse``, ``rpe_trans``,
             ``rpe_rot``, ``tracking_rate``, ``scale_error``, ``first_tracked``, ``maps``
             (``None`` where not available).
-        runs: per-run metrics (``RunMetrics.to_dict()``), failure reasons included.
-        cached: the result came from the trial cache (no SLAM run).
+        runs: per-run metrics (``RunMetrics.to_dict()``), failure reasons included, with
+            ``passed`` (that run met every criterion) and ``cached``.
+        cached: every run came from the cache (no SLAM run).
         wall_time_s: time spent on this trial (s), perturbing and SLAM included.
-        repeat: a re-run of the envelope's edge (flakiness check).
-        failed: the criteria that did not hold, in words.
+        failed: the criteria that did not hold on the median metrics, in words.
         artifacts: files made for reports, by kind: ``frame`` (an example perturbed frame,
             PNG), ``trajectory`` (ground truth and estimate, PNG).
     """
@@ -38,9 +38,31 @@ class Trial:
     runs: list[dict[str, Any]] = field(default_factory=list)
     cached: bool = False
     wall_time_s: float = 0.0
-    repeat: bool = False
     failed: list[str] = field(default_factory=list)
     artifacts: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def passes(self) -> int:
+        """Runs that met every criterion."""
+        return sum(bool(r.get("passed", self.passed)) for r in self.runs)
+
+    @property
+    def fails(self) -> int:
+        """Runs that did not (a run the machine starved, which fell behind the sensor clock
+        even re-paced, is not counted: it abstains)."""
+        return len(self.runs) - self.passes - self.abstained
+
+    @property
+    def abstained(self) -> int:
+        """Runs that failed only after falling behind the sensor clock: no vote."""
+        return sum(bool(r.get("abstained")) for r in self.runs)
+
+    def votes(self) -> str:
+        """``3 of 3 runs passed``, ``2 of 3 runs failed``: the runs behind the verdict."""
+        agreeing = self.passes if self.passed else self.fails
+        voting = self.passes + self.fails
+        text = f"{agreeing} of {voting} run{'s' if voting != 1 else ''} {'passed' if self.passed else 'failed'}"
+        return text + (f" ({self.abstained} starved by the machine, not counted)" if self.abstained else "")
 
 
 @dataclass
@@ -57,7 +79,7 @@ class Boundary:
         unit = f" {self.unit}" if self.unit else ""
         if self.pass_value is not None and self.fail_value is not None:
             lo, hi = sorted((self.pass_value, self.fail_value))
-            return f"{lo:.4g}-{hi:.4g}{unit}"
+            return f"{lo:.4g}{'-' if lo >= 0 else ' to '}{hi:.4g}{unit}"
         if self.pass_value is not None:
             return f"beyond {self.pass_value:.4g}{unit} (passed everywhere searched)"
         if self.fail_value is not None:
@@ -124,14 +146,42 @@ class Outcome:
     def cached_trials(self) -> int:
         return sum(t.cached for t in self.trials)
 
+    @property
+    def runs(self) -> int:
+        """SLAM runs behind the outcome (cached ones included)."""
+        return sum(len(t.runs) for t in self.trials)
+
+    def end_trials(self) -> tuple[Trial | None, Trial | None]:
+        """The trials at the bracket's pass and fail ends (the last trial at each value)."""
+
+        def at(value: float | None) -> Trial | None:
+            return next((t for t in reversed(self.trials) if value is not None and t.value == value), None)
+
+        return at(self.boundary.pass_value), at(self.boundary.fail_value)
+
+    def confidence(self) -> str:
+        """How sure the result is, from the runs behind the deciding verdicts:
+        ``edge 3 of 3 runs passed; pass end 3 of 3 runs passed, fail end 4 of 5 runs failed``,
+        or ``1 run per trial`` (a deterministic system)."""
+        if not self.trials or all(len(t.runs) <= 1 for t in self.trials):
+            return "1 run per trial"
+        parts = [f"edge {self.trials[0].votes()}" if self.termination != "single" else self.trials[0].votes()]
+        ends = [f"{label} {t.votes()}" for label, t in zip(("pass end", "fail end"), self.end_trials()) if t is not None and t is not self.trials[0]]
+        return "; ".join(parts + ([", ".join(ends)] if ends else []))
+
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        return dict(asdict(self), confidence=self.confidence())
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Outcome:
-        data = dict(data)
+        """Inverse of ``to_dict``; an outcome stored in an older unit is converted
+        (``pytest_sal.units``)."""
+        from pytest_sal.units import upgrade_outcome
+
+        data = upgrade_outcome(dict(data))
+        data.pop("confidence", None)
         data["boundary"] = Boundary(**data["boundary"])
         data["previous"] = None if data.get("previous") is None else Boundary(**data["previous"])
-        data["trials"] = [Trial(**t) for t in data.get("trials", [])]
+        data["trials"] = [Trial(**{k: v for k, v in t.items() if k != "repeat"}) for t in data.get("trials", [])]
         data["criteria"] = [(str(m), str(op), float(v)) for m, op, v in data.get("criteria", [])]
         return cls(**data)

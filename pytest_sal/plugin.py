@@ -22,6 +22,7 @@ __all__ = [
     "pytest_configure",
     "pytest_generate_tests",
     "pytest_pyfunc_call",
+    "pytest_report_header",
     "pytest_report_teststatus",
     "pytest_runtest_makereport",
     "pytest_runtest_setup",
@@ -57,6 +58,20 @@ def pytest_configure(config: pytest.Config) -> None:
     session = SalSession(config)
     config.stash[SAL_SESSION] = session
     config.pluginmanager.register(session, "sal-session")  # collects outcomes from reports
+
+
+def pytest_report_header(config: pytest.Config) -> list[str]:
+    """Say at the start when the robustness tests' ORB-SLAM3 runs will not all get the cores
+    they need (more xdist workers than cores, or a machine already busy): such runs fall
+    behind the sensor clock; they are re-paced and marked, and take longer."""
+    session: SalSession = config.stash[SAL_SESSION]
+    if not session.runs_orbslam3():
+        return []
+    from sal_wrappers import oversubscribed_warning
+
+    workers = getattr(config.option, "numprocesses", None)
+    warning = oversubscribed_warning(int(workers) if isinstance(workers, int) and workers > 0 else 1)
+    return [warning] if warning else []
 
 
 def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
@@ -109,9 +124,10 @@ def pytest_runtest_setup(item: pytest.Item) -> None:
 
 # -- fixtures ----------------------------------------------------------------------------------
 @pytest.fixture
-def sal_runs(request: pytest.FixtureRequest) -> int:
-    """Runs per trial (metrics are the median): ``runs=`` of ``sal.require``, else ini
-    ``sal_runs`` (default 1). Override in conftest.py for every test."""
+def sal_runs(request: pytest.FixtureRequest) -> int | None:
+    """The most runs per trial: ``runs=`` of ``sal.require``, else ini ``sal_runs``, else
+    ``None`` (1 for a deterministic system, 5 for a noisy one such as ORB-SLAM3, which vote
+    until one verdict leads by 2 runs). Override in conftest.py for every test."""
     requirement = getattr(request.function, "sal_requirement", None)
     if requirement is not None and "runs" in requirement.options:
         return int(requirement.options["runs"])
@@ -141,7 +157,7 @@ def sal_level(request: pytest.FixtureRequest) -> Any:
 
 
 @pytest.fixture
-def sal_outcome(request: pytest.FixtureRequest, sal_dataset: Any, sal_system: Any, sal_runs: int, tmp_path: Path) -> Any:
+def sal_outcome(request: pytest.FixtureRequest, sal_dataset: Any, sal_system: Any, sal_runs: int | None, tmp_path: Path) -> Any:
     """The ``Outcome`` of the boundary search of this test's ``sal.require``: verdict,
     boundary interval, trials and their metrics. A requirement that does not hold fails the
     test before its body runs."""
@@ -152,7 +168,7 @@ def sal_outcome(request: pytest.FixtureRequest, sal_dataset: Any, sal_system: An
 
 
 @pytest.fixture
-def sal_trial(request: pytest.FixtureRequest, sal_level: Any, sal_dataset: Any, sal_system: Any, sal_runs: int, tmp_path: Path) -> Any:
+def sal_trial(request: pytest.FixtureRequest, sal_level: Any, sal_dataset: Any, sal_system: Any, sal_runs: int | None, tmp_path: Path) -> Any:
     """The ``Trial`` at this item's ``sal.sweep`` level or ``sal.at`` point: ``metrics``
     (ate_rmse, tracking_rate, ...), ``passed``, ``runs``. A level that misses the requirement
     fails the test before its body runs."""
@@ -193,6 +209,9 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) ->
             ("sal_boundary_pass", "" if outcome.boundary.pass_value is None else f"{outcome.boundary.pass_value:g}"),
             ("sal_boundary_fail", "" if outcome.boundary.fail_value is None else f"{outcome.boundary.fail_value:g}"),
             ("sal_trials", str(len(outcome.trials))),
+            ("sal_runs", str(outcome.runs)),
+            ("sal_confidence", outcome.confidence()),
+            ("sal_unit", outcome.boundary.unit),
             ("sal_outcome", json.dumps(outcome.to_dict())),
         ]
         report.user_properties.extend(properties)
@@ -233,10 +252,11 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
 def _trace(outcome: Any) -> str:
     unit = f" {outcome.boundary.unit}" if outcome.boundary.unit else ""
     lines = [f"{outcome.requirement}; boundary {outcome.boundary.text()} ({outcome.termination})"]
+    lines.append(f"  confidence: {outcome.confidence()} ({len(outcome.trials)} trials, {outcome.runs} runs)")
     for trial in outcome.trials:
         verdict = "pass" if trial.passed else "FAIL"
         flags = " (cached)" if trial.cached else ""
-        flags += " (repeat)" if trial.repeat else ""
+        flags += f" ({trial.votes()})" if len(trial.runs) > 1 else ""
         metrics = ", ".join(f"{k} {v:.4g}" for k, v in trial.metrics.items() if isinstance(v, float))
         lines.append(f"  {outcome.parameter} = {trial.value:g}{unit}: {verdict}  {metrics}{flags}")
     return "\n".join(lines)

@@ -193,6 +193,11 @@ def regressions(checks: list[RegressionCheck], current: Outcome, previous: Outco
     a previous outcome)."""
     if previous is None:
         return []
+    if previous.parameter == current.parameter and previous.boundary.unit != current.boundary.unit:
+        return [
+            f"not compared: the history has {current.parameter} in {previous.boundary.unit or 'no unit'!r}, this run in "
+            f"{current.boundary.unit or 'no unit'!r}; save a new baseline with --sal-save"
+        ]
     return [message for check in checks if (message := check.fails(current, previous)) is not None]
 
 
@@ -220,11 +225,11 @@ def warm_start(
 
 
 def edge_trial(outcome: Outcome) -> Trial | None:
-    """The first (not repeated) trial at the outcome's edge value, or ``None``."""
+    """The first trial at the outcome's edge value, or ``None``."""
     if outcome.edge is None:
         return None
     for trial in outcome.trials:
-        if not trial.repeat and math.isclose(trial.value, outcome.edge, rel_tol=1e-9, abs_tol=1e-12):
+        if math.isclose(trial.value, outcome.edge, rel_tol=1e-9, abs_tol=1e-12):
             return trial
     return None
 

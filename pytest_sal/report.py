@@ -35,7 +35,9 @@ __all__ = [
     "short_id",
     "status",
     "summary_rows",
+    "table_columns",
     "terminal_table",
+    "trial_verdict",
     "write_html_report",
     "write_markdown",
 ]
@@ -48,6 +50,7 @@ COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("requirement", "requirement", "<"),
     ("boundary", "boundary", "<"),
     ("trials", "trials", ">"),
+    ("confidence", "votes", "<"),
     ("margin", "margin", ">"),
     ("change", "change", ">"),
     ("verdict", "verdict", "<"),
@@ -64,7 +67,7 @@ _MIN_WIDTHS: tuple[dict[str, int], ...] = (
 #: How much of the narrowing each column takes (relative).
 _SHARE = {"test": 3.0, "parameter": 1.5, "boundary": 1.5, "system": 1.0, "requirement": 1.0}
 #: Columns left out, in turn, when the table cannot be narrowed enough.
-_DROP_ORDER = ("system", "change", "requirement", "parameter")
+_DROP_ORDER = ("confidence", "system", "change", "requirement", "parameter")
 #: Columns whose end says most (test ids, ``(night>>fog).visibility_m``) lose their left end.
 _LEFT_TRUNCATED = ("test", "parameter")
 _SEP = "  "
@@ -169,6 +172,19 @@ def trials_cell(outcome: Outcome) -> str:
     return f"{len(outcome.trials)} ({cached} cached)" if cached else str(len(outcome.trials))
 
 
+def confidence_cell(outcome: Outcome) -> str:
+    """The runs agreeing with the verdict at the edge, then at the pass and fail ends, short:
+    ``3/3; 3/3 4/5`` (``1 run/trial`` for a deterministic system)."""
+    if all(len(t.runs) <= 1 for t in outcome.trials):
+        return "1 run/trial"
+
+    def share(t: Trial) -> str:
+        return f"{t.passes if t.passed else t.fails}/{len(t.runs)}"
+
+    ends = [share(t) for t in outcome.end_trials() if t is not None and t is not outcome.trials[0]]
+    return share(outcome.trials[0]) + (f"; {' '.join(ends)}" if ends else "")
+
+
 def headline(outcomes: Sequence[Outcome]) -> str:
     """``3 robustness requirements: 2 passed, 1 failed`` (regressed and flaky counted apart)."""
     n = len(outcomes)
@@ -181,19 +197,6 @@ def headline(outcomes: Sequence[Outcome]) -> str:
         parts.append(f"{flaky} flaky")
     noun = "robustness requirement" if n == 1 else "robustness requirements"
     return f"{n} {noun}: {', '.join(parts)}"
-
-
-def bracket_trials(outcome: Outcome) -> tuple[Trial | None, Trial | None]:
-    """The trials at the boundary's pass end and fail end (the first such trial that is not a
-    repeat, else a repeat), or ``None``."""
-
-    def at(value: float | None, passed: bool) -> Trial | None:
-        if value is None:
-            return None
-        found = [t for t in outcome.trials if t.passed == passed and math.isclose(t.value, value, rel_tol=1e-9, abs_tol=1e-12)]
-        return next((t for t in found if not t.repeat), found[0] if found else None)
-
-    return at(outcome.boundary.pass_value, True), at(outcome.boundary.fail_value, False)
 
 
 def trial_metric_names(outcome: Outcome) -> list[str]:
@@ -227,6 +230,7 @@ def summary_rows(outcomes: Iterable[Outcome]) -> list[dict[str, str]]:
                 "requirement": envelope_text(o),
                 "boundary": boundary_cell(o),
                 "trials": trials_cell(o),
+                "confidence": confidence_cell(o),
                 "margin": signed(o.margin, o.boundary.unit),
                 "change": change_cell(o),
                 "verdict": _VERDICT_TEXT.get(status(o), status(o)),
@@ -235,6 +239,12 @@ def summary_rows(outcomes: Iterable[Outcome]) -> list[dict[str, str]]:
             }
         )
     return rows
+
+
+def table_columns(rows: list[dict[str, str]]) -> list[tuple[str, str, str]]:
+    """``COLUMNS``, without "votes" when every test ran one run per trial (it would say nothing)."""
+    quiet = all(r["confidence"] == "1 run/trial" for r in rows)
+    return [c for c in COLUMNS if not (quiet and c[0] == "confidence")]
 
 
 def terminal_table(outcomes: Iterable[Outcome], width: int = 120) -> list[str]:
@@ -246,11 +256,12 @@ def terminal_table(outcomes: Iterable[Outcome], width: int = 120) -> list[str]:
     when even their narrowest is too wide, the system, change, requirement and parameter
     columns are left out, in that order."""
     rows = summary_rows(outcomes)
-    natural = {key: max([len(header)] + [len(r[key]) for r in rows]) for key, header, _ in COLUMNS}
+    shown = table_columns(rows)
+    natural = {key: max([len(header)] + [len(r[key]) for r in rows]) for key, header, _ in shown}
     if sum(natural.values()) + len(_SEP) * (len(COLUMNS) - 1) > width:  # the tests' names say more than their files
         rows = [{**r, "test": r["test"].split("::", 1)[-1]} for r in rows]
         natural["test"] = max([len("test")] + [len(r["test"]) for r in rows])
-    columns, widths = list(COLUMNS), dict(natural)
+    columns, widths = list(shown), dict(natural)
     for drop in (None, *_DROP_ORDER):
         columns = [c for c in columns if c[0] != drop]
         widths = {key: natural[key] for key, _, _ in columns}
@@ -314,9 +325,12 @@ def markdown_report(outcomes: Iterable[Outcome], *, title: str = "Robustness") -
     lines = [f"## {md(title)}", "", f"**{md(headline(outcomes))}**", ""]
     if outcomes:
         rows = summary_rows(outcomes)
-        cells = [[md_code(r["test"]) if key == "test" else md(r[key]) for key, _, _ in COLUMNS] for r in rows]
-        lines += _md_table([h for _, h, _ in COLUMNS], cells, [a for _, _, a in COLUMNS])
+        columns = table_columns(rows)
+        cells = [[md_code(r["test"]) if key == "test" else md(r[key]) for key, _, _ in columns] for r in rows]
+        lines += _md_table([h for _, h, _ in columns], cells, [a for _, _, a in columns])
         lines += ["", "_margin and change: + towards the severe side (the system copes with more)_"]
+        if any(c[0] == "confidence" for c in columns):
+            lines += ["", "_votes: runs agreeing with the verdict at the envelope's edge; then at the pass and fail ends_"]
     for o in outcomes:
         if needs_details(o):
             lines += ["", *_md_details(o)]
@@ -329,12 +343,13 @@ def _md_details(o: Outcome) -> list[str]:
     lines.append(f"- **requirement**: {md_code(o.requirement)}")
     lines.append(f"- **system**: {md(o.system)}; **dataset**: {md(o.dataset)}")
     lines.append(f"- **boundary**: {md(o.boundary.text())}; **margin**: {md(signed(o.margin, unit))}")
-    lines.append(f"- **search**: {len(o.trials)} trials ({o.cached_trials} cached), stopped: {md(o.termination)}")
+    lines.append(f"- **search**: {len(o.trials)} trials, {o.runs} runs ({o.cached_trials} trials cached), stopped: {md(o.termination)}")
+    lines.append(f"- **confidence**: {md(o.confidence())}")
     if o.previous is not None:
         lines.append(f"- **previous boundary**: {md(o.previous.text())}; **change**: {md(change_cell(o))}")
     if o.regression:
         lines.append(f"- **regression**: {md(o.regression)}")
-    pass_trial, fail_trial = bracket_trials(o)
+    pass_trial, fail_trial = o.end_trials()
     for label, trial in (("last pass", pass_trial), ("first fail", fail_trial)):
         if trial is not None:
             lines.append(f"- **{label}** at {md(with_unit(trial.value, unit))}: {md(_metrics_summary(o, trial))}")
@@ -342,7 +357,7 @@ def _md_details(o: Outcome) -> list[str]:
         names = trial_metric_names(o)
         header = ["#", f"value [{unit}]" if unit else "value", "verdict", *names, "cached", "failed criteria"]
         rows = [
-            [str(i), num(t.value), _trial_verdict(t), *(metric_text(n, t.metrics.get(n)) for n in names), "yes" if t.cached else "", "; ".join(t.failed)]
+            [str(i), num(t.value), trial_verdict(t), *(metric_text(n, t.metrics.get(n)) for n in names), "yes" if t.cached else "", "; ".join(t.failed)]
             for i, t in enumerate(o.trials, 1)
         ]
         align = ["<", ">", "<", *[">"] * len(names), "<", "<"]
@@ -355,8 +370,9 @@ def _md_details(o: Outcome) -> list[str]:
     return lines
 
 
-def _trial_verdict(t: Trial) -> str:
-    return ("pass" if t.passed else "fail") + (" (repeat)" if t.repeat else "")
+def trial_verdict(t: Trial) -> str:
+    """``pass``, or ``fail (2 of 3 runs failed)`` when more than one run voted."""
+    return ("pass" if t.passed else "fail") + (f" ({t.votes()})" if len(t.runs) > 1 else "")
 
 
 def _metrics_summary(o: Outcome, t: Trial) -> str:

@@ -26,9 +26,7 @@ from matplotlib.transforms import blended_transform_factory
 from pytest_sal.outcome import Outcome, Trial
 from pytest_sal.plots import DPI, FIGSIZE, save_png
 from pytest_sal.report import (
-    COLUMNS,
     boundary_cell,
-    bracket_trials,
     change_cell,
     envelope_text,
     headline,
@@ -38,6 +36,8 @@ from pytest_sal.report import (
     signed,
     status,
     summary_rows,
+    table_columns,
+    trial_verdict,
     trial_metric_names,
     truncate_left,
     with_unit,
@@ -62,7 +62,7 @@ LOG_SPAN = 100.0
 
 def metric_figure(outcome: Outcome) -> Figure:
     """The criteria's metrics (else ATE and tracking rate) against the parameter value, one panel
-    each: a marker per trial (green pass, red cross fail, hollow for repeats, a triangle at the
+    each: a marker per trial (green pass, red cross fail, a triangle at the
     top where the metric is missing), the criterion threshold, the boundary interval as a band,
     the previous boundary hatched, the envelope's edge as a dashed line with its required side
     shaded. Log x when the trials
@@ -155,7 +155,7 @@ def _draw_trials(ax: Axes, outcome: Outcome, name: str, *, first: bool) -> None:
     def y_of(t: Trial) -> float | None:
         return float(t.passed) if name == "passed" else _finite(t.metrics.get(name))
 
-    shown = sorted((t.value, y) for t in outcome.trials if not t.repeat and (y := y_of(t)) is not None)
+    shown = sorted((t.value, y) for t in outcome.trials if (y := y_of(t)) is not None)
     if len(shown) > 1:
         ax.plot(*np.array(shown).T, color="0.6", linewidth=1.0, zorder=2)
     top = blended_transform_factory(ax.transData, ax.transAxes)
@@ -163,12 +163,10 @@ def _draw_trials(ax: Axes, outcome: Outcome, name: str, *, first: bool) -> None:
     for t in outcome.trials:
         colour = PASS_COLOUR if t.passed else FAIL_COLOUR
         y = y_of(t)
-        key = ("pass" if t.passed else "fail") + (" (repeat)" if t.repeat else "") + (" (no value)" if y is None else "")
+        key = ("pass" if t.passed else "fail") + (" (no value)" if y is None else "")
         label = key if first and key not in labelled else None
         labelled.add(key)
         style: dict[str, object] = {"color": colour, "markersize": 8, "linestyle": "none", "zorder": 4, "label": label}
-        if t.repeat:
-            style.update(markerfacecolor="white", markeredgewidth=1.6)
         if y is None:
             ax.plot([t.value], [0.96], marker="v", transform=top, clip_on=False, **style)  # type: ignore[arg-type]
         else:
@@ -210,11 +208,12 @@ def write_html_report(outcomes: Iterable[Outcome], directory: str | Path, *, tit
     slugs = _slugs(outcomes)
     sections = [_section(o, slug, directory) for o, slug in zip(outcomes, slugs)]
     rows = summary_rows(outcomes)
-    head = "".join(f"<th{_num_cls(align == '>')}>{esc(h)}</th>" for _, h, align in COLUMNS)
+    columns = table_columns(rows)
+    head = "".join(f"<th{_num_cls(align == '>')}>{esc(h)}</th>" for _, h, align in columns)
     body = []
     for row, slug in zip(rows, slugs):
         cells = []
-        for key, _, align in COLUMNS:
+        for key, _, align in columns:
             text = esc(row[key])
             if key == "test":
                 text = f"<a href='#{slug}' title='{esc(row['test_id'])}'>{text}</a>"
@@ -243,12 +242,13 @@ def _section(o: Outcome, slug: str, directory: Path) -> str:
         ("dataset", esc(o.dataset)),
         ("boundary", f"{esc(o.boundary.text())} <span class='dim'>({esc(o.termination)})</span>"),
         ("margin", esc(signed(o.margin, unit))),
+        ("confidence", f"{esc(o.confidence())} <span class='dim'>({len(o.trials)} trials, {o.runs} runs)</span>"),
     ]
     if o.previous is not None:
         facts.append(("previous", f"{esc(o.previous.text())} <span class='dim'>(change {esc(change_cell(o))})</span>"))
     if o.regression:
         facts.append(("regression", f"<span class='bad'>{esc(o.regression)}</span>"))
-    for label, trial in zip(("last pass", "first fail"), bracket_trials(o)):
+    for label, trial in zip(("last pass", "first fail"), o.end_trials()):
         if trial is not None:
             metrics = ", ".join(f"{n} {metric_text(n, trial.metrics.get(n))}" for n in trial_metric_names(o))
             facts.append((label, f"{esc(with_unit(trial.value, unit))}: {esc(metrics)}"))
@@ -281,7 +281,7 @@ def _trials_table(o: Outcome) -> str:
     num_cols = {0, 1, *range(3, 3 + len(names)), 4 + len(names)}  # #, value, metrics, time
     rows = []
     for i, t in enumerate(o.trials, 1):
-        verdict = ("pass" if t.passed else "fail") + (" (repeat)" if t.repeat else "")
+        verdict = trial_verdict(t)
         cells = [str(i), num(t.value), verdict, *(metric_text(n, t.metrics.get(n)) for n in names)]
         cells += ["yes" if t.cached else "", f"{t.wall_time_s:.1f} s", "; ".join(t.failed)]
         tds = "".join(f"<td{_num_cls(j in num_cols)}>{esc(c)}</td>" for j, c in enumerate(cells))
@@ -302,7 +302,7 @@ def _artifact_figures(o: Outcome, kind: str, assets: Path, directory: Path) -> l
         if not source or source in seen:
             continue
         seen.add(source)
-        caption = f"{with_unit(t.value, unit)}: {'pass' if t.passed else 'fail'}" + (" (repeat)" if t.repeat else "")
+        caption = f"{with_unit(t.value, unit)}: {trial_verdict(t)}"
         cls = "passed" if t.passed else "failed"
         src = Path(source)
         if not src.is_file():

@@ -212,9 +212,16 @@ def _check_envelope(bound: Bound) -> None:
             f"write {bound.ref.label} {better} {bound.value:g} (the system must cope with everything milder)"
         )
     try:
-        param.validate(param.search.canonicalize(bound.value) if param.search else bound.value, param.owner.name)  # type: ignore[union-attr]
+        param.validate(bound.value, param.owner.name)  # type: ignore[union-attr]
     except SalError as exc:
         raise InvalidRequirement(f"{bound}: {exc}") from None
+    unchanged = bound.ref.unchanged_at(bound.value)
+    if unchanged is not None:
+        raise InvalidRequirement(
+            f"{bound}: the envelope's edge cannot change the frames ({unchanged}), so the test would pass "
+            f"whatever the system does; bound a severity that perturbs, e.g. {bound.ref.label} {bound.op} {param.default:g}"
+            f"{' ' + bound.ref.unit if bound.ref.unit else ''}"
+        )
 
 
 def _check_search_range(envelope: Bound, search_range: Any) -> None:
@@ -245,12 +252,12 @@ def _check_options(options: Mapping[str, Any], envelope: Bound | None) -> None:
         if value is not None and (not isinstance(value, int) or isinstance(value, bool) or value < 1):
             raise InvalidRequirement(f"sal.require(): {name} must be a whole number >= 1, got {value!r}")
     tolerance = options.get("tolerance")
-    if tolerance is not None and (not isinstance(tolerance, numbers.Real) or not tolerance > 0):
+    if tolerance is not None and (not isinstance(tolerance, numbers.Real) or not math.isfinite(tolerance) or not tolerance > 0):
         raise InvalidRequirement(f"sal.require(): tolerance must be a number > 0 in the parameter's unit, got {tolerance!r}")
     search_range = options.get("search_range")
     if search_range is not None:
         if envelope is None:
             raise InvalidRequirement("sal.require(): search_range needs a parameter bound to search")
         if not (isinstance(search_range, (tuple, list)) and len(search_range) == 2 and all(isinstance(v, numbers.Real) for v in search_range)):
-            raise InvalidRequirement(f"sal.require(): search_range must be (low, high) in {envelope.ref.param.unit or 'the unit'}, got {search_range!r}")
+            raise InvalidRequirement(f"sal.require(): search_range must be (low, high) in {envelope.ref.unit or 'the unit'}, got {search_range!r}")
         _check_search_range(envelope, search_range)

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from pytest_sal.outcome import Boundary, Outcome, Trial
-from pytest_sal.requirements import Requirement
+from pytest_sal.requirements import InvalidRequirement, Requirement
 from pytest_sal.search import SearchSpace, boundary_search
 from pytest_sal.trials import TrialRunner
 from sal_modules.refs import ParamRef
@@ -17,19 +17,17 @@ __all__ = ["SearchSettings", "failure_message", "search_outcome", "search_space"
 
 @dataclass(frozen=True)
 class SearchSettings:
-    """Defaults a requirement may override (ini ``sal_tolerance``, ``sal_max_trials``,
-    ``sal_noise``).
+    """Defaults a requirement may override (ini ``sal_tolerance``, ``sal_max_trials``).
 
     Attributes:
-        tolerance_pct: default tolerance, percent of the envelope's edge value.
+        tolerance_pct: default tolerance: the search stops when the bracket's width is at most
+            this percent of its larger end (20-22 m at 10 %), which suits linear parameters and
+            ones searched over decades (0.08-0.09 Mbit/s) alike.
         max_trials: default trial budget.
-        noise: relative distance of a metric to its threshold within which the edge trial is
-            run again to detect a flaky verdict (0.1: within 10 %).
     """
 
     tolerance_pct: float = 10.0
     max_trials: int = 8
-    noise: float = 0.05
 
 
 def search_space(ref: ParamRef, search_range: tuple[float, float] | None = None) -> SearchSpace:
@@ -37,7 +35,7 @@ def search_space(ref: ParamRef, search_range: tuple[float, float] | None = None)
     scale = ref.param.search_space()
     lo, hi = (scale.min, scale.max) if search_range is None else sorted(search_range)
     mild, severe = (hi, lo) if ref.param.worse == "lower" else (lo, hi)
-    return SearchSpace(mild=float(mild), severe=float(severe), domain=scale.domain)
+    return SearchSpace(mild=float(mild), severe=float(severe), domain=scale.domain, scale=scale.scale)
 
 
 def search_outcome(
@@ -54,34 +52,45 @@ def search_outcome(
     space = search_space(ref, requirement.options.get("search_range"))
     edge = envelope.value
     tolerance = requirement.options.get("tolerance")
-    if tolerance is None:
-        tolerance = abs(edge) * settings.tolerance_pct / 100 or abs(space.mild - space.severe) * settings.tolerance_pct / 100
-    if space.domain == "integer":
-        tolerance = max(tolerance, 1.0)
+    rel_tolerance = None if tolerance is not None else settings.tolerance_pct / 100
     max_trials = requirement.options.get("max_trials", settings.max_trials)
-    trials: list[Trial] = []
+    unchanged = runner.unchanged_frames(edge)
+    if unchanged is not None:
+        raise InvalidRequirement(
+            f"{envelope}: the envelope's edge leaves the frames of {runner.dataset.name} unchanged (frames "
+            f"{', '.join(map(str, unchanged))} differ from the clean ones by rounding only), so the test would pass whatever "
+            f"the system does; bound a severity that perturbs this dataset"
+        )
 
     def evaluate(value: float) -> tuple[bool, Trial]:
-        # the edge evaluated again is the flakiness repeat: it must run, not read the first from the cache
-        attempt = sum(t.value == value for t in trials) if value == edge else 0
-        trial = runner.evaluate(value, attempt)
-        trials.append(trial)
+        trial = runner.evaluate(value)
         return trial.passed, trial
 
-    def near_threshold(trial: Trial) -> bool:
-        return any(c.near(trial.metrics, settings.noise) for c in requirement.criteria)
-
-    result = boundary_search(evaluate, space, edge, tolerance, max_trials, warm_start, recheck_edge=near_threshold)
-    for point in result.trials:
-        point.info.repeat = point.repeat
+    result = boundary_search(evaluate, space, edge, tolerance, max_trials, warm_start, judge=_Judge(runner), rel_tolerance=rel_tolerance)
     verdict = "flaky" if result.flaky else "passed" if result.edge_passed else "failed"
     boundary = Boundary(result.pass_value, result.fail_value, ref.unit)
+    trials = [point.info for point in result.trials]
     return _outcome(runner, requirement, test_id, verdict, boundary, result.termination, trials, result.contradictions)
 
 
+@dataclass(frozen=True)
+class _Judge:
+    """The ``search.Judge`` of a runner's trials (noisy systems only; see ``VotePolicy``)."""
+
+    runner: TrialRunner
+
+    def confirm(self, info: Trial) -> bool:
+        return self.runner.confirm(info)
+
+    def settled(self, info: Trial) -> bool:
+        return self.runner.settled(info)
+
+
 def single_outcome(runner: TrialRunner, requirement: Requirement, test_id: str, value: float) -> Outcome:
-    """The outcome of one explicit point (``sal.sweep`` level or ``sal.at``)."""
+    """The outcome of one explicit point (``sal.sweep`` level or ``sal.at``), its verdict
+    confirmed like an envelope's edge."""
     trial = runner.evaluate(value)
+    runner.confirm(trial)
     boundary = Boundary(value if trial.passed else None, None if trial.passed else value, runner.ref.unit)
     return _outcome(runner, requirement, test_id, "passed" if trial.passed else "failed", boundary, "single", [trial], [])
 
@@ -103,7 +112,7 @@ def _outcome(
         margin = (edge - boundary.pass_value) if ref.param.worse == "lower" else (boundary.pass_value - edge)
     deciding = edge if edge is not None else trials[0].value
     reproduction = (
-        f"@sal.at({ref.label}, {deciding:g})  # seed {runner.seed}, runs {runner.runs}, "
+        f"@sal.at({ref.label}, {deciding:g})  # {ref.unit or 'no unit'}; seed {runner.seed}, up to {runner.policy.max_runs} run(s), "
         f"system {runner.system.name}, dataset {runner.dataset.name}"
     )
     return Outcome(
@@ -148,11 +157,9 @@ def failure_message(outcome: Outcome) -> str:
     first = outcome.trials[0]
     lines = []
     if outcome.verdict == "flaky":
-        repeat = next((t for t in outcome.trials if t.repeat), None)
         lines.append(
-            f"FLAKY: {outcome.requirement}: at the edge {outcome.parameter} = {first.value:g}{unit} one run "
-            f"{'passed' if first.passed else 'failed'} and the repeat {'passed' if repeat and repeat.passed else 'failed'}; "
-            f"the metric sits within noise of its threshold"
+            f"FLAKY: {outcome.requirement}: at the edge {outcome.parameter} = {first.value:g}{unit} the runs disagree "
+            f"({first.passes} passed, {first.fails} failed): the edge sits on the system's failure boundary"
         )
     elif outcome.verdict == "passed":  # failed by a --sal-compare-fail check only
         lines.append(f"regressed against the history (the requirement is met): {outcome.requirement}")
@@ -160,11 +167,13 @@ def failure_message(outcome: Outcome) -> str:
     else:
         lines.append(f"requirement not met: {outcome.requirement}")
         lines.append(f"  at {outcome.parameter} = {first.value:g}{unit}: {_metrics_text(first.metrics)}; failed: {', '.join(first.failed)}")
-    lines.append(f"  boundary: {outcome.parameter} {outcome.boundary.text()} ({len(outcome.trials)} trials, {outcome.termination})")
-    for label, value in (("pass end", outcome.boundary.pass_value), ("fail end", outcome.boundary.fail_value)):
-        trial = next((t for t in outcome.trials if value is not None and t.value == value), None)
+    lines.append(
+        f"  boundary: {outcome.parameter} {outcome.boundary.text()} ({len(outcome.trials)} trials, {outcome.runs} runs, "
+        f"{outcome.termination}); {outcome.confidence()}"
+    )
+    for label, trial in zip(("pass end", "fail end"), outcome.end_trials()):
         if trial is not None:
-            lines.append(f"  {label} {value:g}{unit}: {_metrics_text(trial.metrics)}")
+            lines.append(f"  {label} {trial.value:g}{unit}: {_metrics_text(trial.metrics)} ({trial.votes()})")
     for text in outcome.contradictions:
         lines.append(f"  not monotonic: {text}")
     if outcome.regression:

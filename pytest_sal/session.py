@@ -31,11 +31,10 @@ def _compare_fail(text: str) -> Any:
 
 #: ini options read as numbers: (type, smallest value, whether the smallest is excluded, what it is)
 _INI_NUMBERS: dict[str, tuple[type, float, bool, str]] = {
-    "sal_runs": (int, 1, False, "a whole number >= 1 (runs per trial)"),
+    "sal_runs": (int, 1, False, "a whole number >= 1 (the most runs per trial), or auto"),
     "sal_seed": (int, 0, False, "a whole number >= 0 (perturbation seed)"),
     "sal_max_trials": (int, 1, False, "a whole number >= 1 (trials per boundary search)"),
-    "sal_tolerance": (float, 0.0, True, "a number > 0 (percent of the envelope's edge)"),
-    "sal_noise": (float, 0.0, False, "a number >= 0 (relative distance of a metric to its threshold)"),
+    "sal_tolerance": (float, 0.0, True, "a number > 0 (percent of the boundary value)"),
     "sal_timeout": (float, 0.0, True, "a number > 0 (seconds per SLAM run)"),
 }
 
@@ -119,10 +118,9 @@ def add_options(parser: pytest.Parser) -> None:
     parser.addini("sal_cache_dir", "trial cache folder (default .sal/cache)", default=None)
     parser.addini("sal_cache_size", "cache size limit, e.g. 5GB (default: none)", default=None)
     parser.addini("sal_history_dir", "history store (default .sal/history)", default=None)
-    parser.addini("sal_tolerance", "default search tolerance, percent of the envelope's edge (default 10)", default="10")
+    parser.addini("sal_tolerance", "default search tolerance: the bracket's width in percent of its larger end (default 10)", default="10")
     parser.addini("sal_max_trials", "default trial budget of a boundary search (default 8)", default="8")
-    parser.addini("sal_runs", "runs per trial (default 1)", default="1")
-    parser.addini("sal_noise", "relative distance of a metric to its threshold at the envelope's edge within which the edge trial is repeated to detect a flaky verdict (default 0.05)", default="0.05")
+    parser.addini("sal_runs", "the most runs per trial; runs vote until one verdict leads by 2 (default auto: 1 for a deterministic system, 5 for a noisy one)", default="auto")
     parser.addini("sal_seed", "perturbation seed (default 0)", default="0")
     parser.addini("sal_timeout", "seconds per SLAM run before it is killed (default 600)", default="600")
     parser.addini("sal_system", "default system: orbslam3 when installed, else reference_vo", default=None)
@@ -157,7 +155,7 @@ class SalSession:
         self.checks = list(getattr(opt, "sal_compare_fail", []) or [])
         if self.checks and self.compare is None:
             self.compare = "last"
-        self.runs = _ini_number(config, "sal_runs")
+        self.runs = None if str(config.getini("sal_runs")).strip() == "auto" else _ini_number(config, "sal_runs")
         self.seed = _ini_number(config, "sal_seed")
         self.timeout = _ini_number(config, "sal_timeout")
         self.system_name = ini("sal_system")
@@ -166,7 +164,6 @@ class SalSession:
         self.settings = SearchSettings(
             tolerance_pct=_ini_number(config, "sal_tolerance"),
             max_trials=_ini_number(config, "sal_max_trials"),
-            noise=_ini_number(config, "sal_noise"),
         )
         if self.use_cache:
             _check_writable(self.cache_dir, "cache folder (--sal-cache-dir, ini sal_cache_dir)", folder=True)
@@ -220,6 +217,14 @@ class SalSession:
             self._datasets[scene] = open_dataset("synthetic", scene=scene, frames=DEFAULT_FRAMES[scene], sensor=sensor)
         return self._datasets[scene]
 
+    def runs_orbslam3(self) -> bool:
+        """The default system is ORB-SLAM3 (named in ini, or installed)."""
+        if self.system_name:
+            return bool(self.system_name == "orbslam3")
+        import importlib.util
+
+        return importlib.util.find_spec("pyorbslam3") is not None
+
     def default_system(self) -> Any:
         from sal_wrappers import create
 
@@ -230,7 +235,7 @@ class SalSession:
         return create("orbslam3" if importlib.util.find_spec("pyorbslam3") else "reference_vo")
 
     # -- running -------------------------------------------------------------------------------
-    def _runner(self, item: pytest.Item, ref: Any, dataset: Any, system: Any, runs: int, workdir: Path) -> Any:
+    def _runner(self, item: pytest.Item, ref: Any, dataset: Any, system: Any, runs: int | None, workdir: Path) -> Any:
         from pytest_sal.trials import TrialRunner
 
         requirement = item.function.sal_requirement  # type: ignore[attr-defined]
@@ -240,7 +245,7 @@ class SalSession:
             artifacts=bool(self.config.option.sal_report_html), cache_frames=bool(self.config.option.sal_cache_frames),
         )
 
-    def search(self, item: pytest.Item, dataset: Any, system: Any, runs: int, workdir: Path) -> Any:
+    def search(self, item: pytest.Item, dataset: Any, system: Any, runs: int | None, workdir: Path) -> Any:
         """Boundary search of ``item``'s requirement; compared with the history when asked."""
         from pytest_sal.regression import warm_start
         from pytest_sal.robustness import search_outcome
@@ -253,7 +258,7 @@ class SalSession:
         outcome = search_outcome(runner, requirement, self.settings, item.nodeid, start)
         return self._compared(outcome, previous)
 
-    def single(self, item: pytest.Item, ref: Any, value: float, dataset: Any, system: Any, runs: int, workdir: Path) -> Any:
+    def single(self, item: pytest.Item, ref: Any, value: float, dataset: Any, system: Any, runs: int | None, workdir: Path) -> Any:
         from pytest_sal.robustness import single_outcome
 
         runner = self._runner(item, ref, dataset, system, runs, workdir)

@@ -56,6 +56,7 @@ class FakeSlam(SlamSystem):
         self.tracked = tracked
         self.flaky = float(flaky)
         self.calls_file = calls_file
+        self.deterministic = not self.flaky  # type: ignore[misc]  # one run per trial unless flaky
         self._share: Callable[[float], float] = eval(f"lambda v: {tracked}", {"min": min, "max": max, "abs": abs})  # noqa: S307 - a test double's own option
         self._runs = 0
 

@@ -1,20 +1,30 @@
-"""One trial: perturb the dataset at one severity, run the system ``runs`` times, score each
-run with evo, aggregate, and judge the requirement. Results are cached content-addressed.
+"""One trial: perturb the dataset at one severity, run the system, score each run with evo,
+and judge the requirement by a vote of runs. Runs are cached content-addressed, one by one.
 
-The cache key holds everything that changes a trial's result: the dataset fingerprint, the
-configured module (name, version, every parameter), the seed, the system (name, version,
-options), the number of runs and the runner version. An identical trial in a later session,
-or in the other xdist worker, is read back instead of run again.
+A deterministic system (``reference_vo``) gets one run per trial. A noisy one (ORB-SLAM3 is
+multi-threaded and uses RANSAC: about one run in six splits its map on a clean 51-frame KITTI
+sequence) gets a sequential vote (``VotePolicy``): runs are added until one verdict leads by
+``lead`` runs or ``max_runs`` are spent, so one unlucky run never decides a bisection step. The
+search asks for a stronger lead (``confirm_lead``) at the envelope's edge and at the final
+bracket's ends. A trial's metrics are the median over its runs; its verdict is the majority.
+
+The cache key of a run holds everything that changes its result: the dataset fingerprint, the
+configured module (name, version, every parameter), the seed, the system's identity (name,
+version, options, the content of the files it runs), the run's number and the runner version.
+An identical run in a later session, or in the other xdist worker, is read back instead of
+run again; a trial that needs more runs than were cached runs only the missing ones.
 """
 
 from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 
 from pytest_sal.cache import ContentCache
@@ -27,10 +37,10 @@ from sal_modules import perturb
 from sal_modules.refs import ParamRef
 from sal_wrappers import SlamSystem
 
-__all__ = ["RUNNER_VERSION", "TrialRunner", "aggregate_metrics", "cached_sequence"]
+__all__ = ["NOISY_RUNS", "RUNNER_VERSION", "TrialRunner", "VotePolicy", "aggregate_metrics", "cached_sequence"]
 
-#: Bumped when a change here changes cached trial results.
-RUNNER_VERSION = 1
+#: Bumped when a change here changes cached results (2: one cache entry per run).
+RUNNER_VERSION = 2
 #: Metrics aggregated over runs (median) into a trial's metrics.
 TRIAL_METRICS = ("ate_rmse", "rpe_trans", "rpe_rot", "tracking_rate", "scale_error", "first_tracked", "maps")
 
@@ -47,102 +57,185 @@ def aggregate_metrics(runs: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
+@dataclass(frozen=True)
+class VotePolicy:
+    """How many runs decide a trial of a noisy system.
+
+    Attributes:
+        max_runs: at most this many runs per trial (1: every verdict rests on one run).
+        lead: a trial's verdict stands once passes and fails differ by this many runs.
+        confirm_lead: the lead the envelope's edge and the final bracket's ends need.
+        confirm_runs: at most this many runs when confirming (default ``max_runs + 2``).
+    """
+
+    max_runs: int = 1
+    lead: int = 2
+    confirm_lead: int = 3
+    confirm_runs: int | None = None
+
+    @classmethod
+    def for_system(cls, system: SlamSystem, runs: int | None) -> VotePolicy:
+        """``runs`` when given (the most runs per trial), else 1 for a deterministic system
+        and ``NOISY_RUNS`` for a noisy one."""
+        if runs is None:
+            runs = 1 if getattr(system, "deterministic", False) else NOISY_RUNS
+        return cls(max_runs=int(runs))
+
+    @property
+    def noisy(self) -> bool:
+        return self.max_runs > 1
+
+    def more(self, passes: int, fails: int, confirming: bool = False, abstained: int = 0) -> bool:
+        """Another run is needed: the lead is short (or no run voted) and runs are left; runs
+        that abstained (starved by the machine) count against the cap."""
+        lead, cap = (self.confirm_lead, self.confirm_runs or self.max_runs + 2) if confirming else (self.lead, self.max_runs)
+        short = abs(passes - fails) < lead if self.noisy else passes + fails == 0
+        return short and passes + fails + abstained < cap
+
+
+#: Most runs per trial of a noisy system when ``sal_runs`` is not set.
+NOISY_RUNS = 5
+
+
 @dataclass
 class TrialRunner:
     """Runs trials of one robustness test.
 
     Args:
         dataset: the clean sequence.
-        ref: the searched parameter (``fog.visibility_m``); values are in its search unit.
+        ref: the searched parameter (``fog.visibility_m``); values are in its unit.
         system: the SLAM system under test.
-        requirement: judges each trial's aggregated metrics.
-        runs: runs per trial (the metrics are the median over them).
+        requirement: judges each run's metrics.
+        runs: the most runs per trial (``None``: 1 for a deterministic system, else
+            ``NOISY_RUNS``); see ``VotePolicy``.
         seed: perturbation seed (the same random pattern at every severity).
-        cache: the trial cache, or ``None`` to always run.
+        cache: the run cache, or ``None`` to always run.
         workdir: where runs write their logs and files.
         timeout: seconds per run.
         artifacts: also store an example frame and a trajectory plot with each computed trial
-            (for the HTML report; trials read from the cache keep what they were stored with).
+            (for the HTML report; runs read from the cache keep what they were stored with).
         cache_frames: write each perturbed sequence once into the cache, in its dataset's
             layout, and give systems the copy read back from there: the same severity is then
             perturbed once for every system and session (worth it for several systems or an
             external ``command`` system; writing costs about 25-45 ms a frame).
+        progress: called with the trial after each evaluation and confirmation.
     """
 
     dataset: Sequence
     ref: ParamRef
     system: SlamSystem
     requirement: Requirement
-    runs: int = 1
+    runs: int | None = None
     seed: int = 0
     cache: ContentCache | None = None
     workdir: Path = Path(".")
     timeout: float | None = 600.0
     artifacts: bool = False
     cache_frames: bool = False
+    progress: Callable[[Trial], None] | None = None
 
-    def module_value(self, value: float) -> Any:
-        """The module's parameter value for search value ``value`` (``canonicalize``)."""
-        scale = self.ref.param.search
-        return scale.canonicalize(value) if scale is not None else value
+    def __post_init__(self) -> None:
+        self.policy = VotePolicy.for_system(self.system, self.runs)
 
-    def key(self, value: float, attempt: int = 0) -> str:
-        module = self.ref.module(self.module_value(value))
-        repeat = {"attempt": attempt} if attempt else {}  # a repeat is its own trial, not the first one's cache entry
+    def key(self, value: float, number: int = 0) -> str:
+        """Cache key of run ``number`` at ``value``."""
         return cache_key(
             runner=RUNNER_VERSION,
             dataset=self.dataset.fingerprint,
-            module=module.to_dict(),
+            module=self.ref.module(value).to_dict(),
             seed=self.seed,
             system=self.system.identity(),
-            runs=self.runs,
-            **repeat,
+            run=number,
         )
 
-    def evaluate(self, value: float, attempt: int = 0) -> Trial:
-        """The trial at search value ``value`` (from the cache when it was run before);
-        ``attempt`` > 0: a repeat of it (the flakiness check), run and cached apart."""
+    def unchanged_frames(self, value: float) -> list[int] | None:
+        """The positions checked when the module at ``value`` leaves the first, middle and last
+        frame as they were (both cameras), else ``None``. "As they were" allows rounding: no
+        pixel moves by more than 1 grey level and fewer than 1 % of them move at all (fog at
+        100 km in a 5 m room: 0.1 % by 1 level). Modules that work on the whole sequence at
+        once (video coding) are not checked: it would cost a full encode."""
+        module = self.ref.module(value)
+        steps = getattr(module, "steps", (module,))
+        if any(step.whole_sequence for step in steps):
+            return None
+        perturbed = perturb(self.dataset, module, seed=self.seed)
+        if len(perturbed) != len(self.dataset):
+            return None
+        positions = sorted({0, len(self.dataset) // 2, len(self.dataset) - 1})
+        for i in positions:
+            clean, changed = self.dataset[i], perturbed[i]
+            if not _same(clean.image, changed.image) or not _same(clean.right, changed.right):
+                return None
+        return positions
+
+    def evaluate(self, value: float) -> Trial:
+        """The trial at ``value``: runs until the vote's lead settles (``VotePolicy.lead``)."""
+        trial = Trial(value=float(value), passed=False)
+        self._extend(trial, confirming=False)
+        return trial
+
+    # -- the Judge of pytest_sal.search ----------------------------------------------------------
+    def confirm(self, trial: Trial) -> bool:
+        """More runs of ``trial`` until its verdict leads by ``confirm_lead``; its verdict."""
+        if self.policy.noisy:
+            self._extend(trial, confirming=True)
+        return trial.passed
+
+    def settled(self, trial: Trial) -> bool:
+        """The runs of ``trial`` agree by at least ``lead`` (always, with one run per trial)."""
+        return not self.policy.noisy or abs(trial.passes - trial.fails) >= self.policy.lead
+
+    def _extend(self, trial: Trial, confirming: bool) -> None:
         start = time.perf_counter()
-        key = self.key(value, attempt)
-        if self.cache is None:
-            data, cached = self._run(value, key), False
-        else:
-            data, cached = self.cache.compute(key, lambda: self._run(value, key))
-        metrics = data["metrics"]
-        return Trial(
-            value=float(value),
-            passed=self.requirement.holds(metrics),
-            metrics=metrics,
-            runs=data["runs"],
-            cached=cached,
-            wall_time_s=time.perf_counter() - start,
-            failed=[str(c) for c in self.requirement.failed(metrics)],
-            artifacts=dict(data.get("artifacts", {})),
-        )
+        added = False
+        while not trial.runs or self.policy.more(trial.passes, trial.fails, confirming, abstained=trial.abstained):
+            number = len(trial.runs)
+            key = self.key(trial.value, number)
+            if self.cache is None:
+                data, cached = self._run(trial.value, key, number), False
+            else:
+                data, cached = self.cache.compute(key, lambda: self._run(trial.value, key, number))
+            passed = self.requirement.holds(data["metrics"])
+            # a run the machine starved is no evidence that the system failed: it gets no vote
+            run = dict(data["metrics"], passed=passed, abstained=bool(data["metrics"].get("starved")) and not passed, cached=cached)
+            trial.runs.append(run)
+            trial.artifacts.update({k: v for k, v in data.get("artifacts", {}).items() if k not in trial.artifacts})
+            added = True
+        if not added:
+            return
+        trial.metrics = aggregate_metrics(trial.runs)
+        trial.passed = trial.passes > trial.fails
+        trial.cached = all(r["cached"] for r in trial.runs)
+        trial.failed = [str(c) for c in self.requirement.failed(trial.metrics)]
+        trial.wall_time_s += time.perf_counter() - start
+        if self.progress is not None:
+            self.progress(trial)
 
-    def _run(self, value: float, key: str) -> dict[str, Any]:
-        module = self.ref.module(self.module_value(value))
+    def _run(self, value: float, key: str, number: int) -> dict[str, Any]:
+        """One run at ``value``: perturb, run the system, score; the first run of a trial also
+        makes the report artifacts."""
+        module = self.ref.module(value)
         perturbed = perturb(self.dataset, module, seed=self.seed)
         if self.cache_frames and self.cache is not None:
             perturbed = cached_sequence(perturbed, self.cache)
         groundtruth = perturbed.groundtruth
-        runs = []
+        folder = self.cache.root / "artifacts" if self.cache is not None and self.artifacts and number == 0 else None
+        result = self.system.run(perturbed, self.workdir / f"{key[:12]}-run{number}", timeout=self.timeout)
+        scored = evaluate(result, groundtruth)
+        metrics = scored.to_dict()
+        metrics["wall_time_s"] = result.wall_time_s
+        metrics["starved"] = result.fell_behind  # the machine could not feed it even re-paced
+        metrics["load"] = result.load
         artifacts: dict[str, str] = {}
-        folder = self.cache.root / "artifacts" if self.cache is not None and self.artifacts else None
-        for number in range(self.runs):
-            result = self.system.run(perturbed, self.workdir / f"{key[:12]}-run{number}", timeout=self.timeout)
-            scored = evaluate(result, groundtruth)
-            metrics = scored.to_dict()
-            metrics["wall_time_s"] = result.wall_time_s
-            runs.append(metrics)
-            if folder is not None and number == 0 and scored.ate is not None and groundtruth is not None:
+        if folder is not None:
+            if scored.ate is not None and groundtruth is not None:
                 from pytest_sal.plots import plot_trajectories
 
                 title = f"{self.system.name} on {perturbed.name}, {self.ref.label} = {value:g} {self.ref.unit}".rstrip()
                 artifacts["trajectory"] = str(plot_trajectories(groundtruth, {self.system.name: scored.ate.estimate}, folder / f"{key}-trajectory.png", title=title))
-        if folder is not None and len(perturbed):
-            artifacts["frame"] = str(_example_frame(perturbed, folder / f"{key}.png"))
-        return {"value": value, "module": module.to_dict(), "metrics": aggregate_metrics(runs), "runs": runs, "artifacts": artifacts}
+            if len(perturbed):
+                artifacts["frame"] = str(_example_frame(perturbed, folder / f"{key}.png"))
+        return {"value": value, "module": module.to_dict(), "metrics": metrics, "artifacts": artifacts}
 
 
 def cached_sequence(sequence: Sequence, cache: ContentCache, *, progress: bool = False) -> Sequence:
@@ -155,6 +248,16 @@ def cached_sequence(sequence: Sequence, cache: ContentCache, *, progress: bool =
     options = {"stereo": True} if sequence.sensor == "stereo" and "stereo" in DATASETS.get(sequence.kind).option_names() else {}
     reopened = open_dataset(sequence.kind, folder, **options)
     return reopened.replace(name=sequence.name, meta=dict(reopened.meta, perturbation=sequence.meta.get("perturbation")))
+
+
+def _same(a: np.ndarray | None, b: np.ndarray | None) -> bool:
+    """Equal up to rounding: at most 1 grey level apart, and on fewer than 1 % of the values."""
+    if a is None or b is None:
+        return a is None and b is None
+    if a.shape != b.shape:
+        return False
+    change = cv2.absdiff(a, b)
+    return int(change.max(initial=0)) <= 1 and np.count_nonzero(change) < 0.01 * change.size
 
 
 def _example_frame(sequence: Sequence, path: Path, width: int = 480) -> Path:

@@ -193,6 +193,11 @@ class Perturbation(ABC):
             raise self.param_error(f"{self.name} has no parameter {name!r}; parameters: {', '.join(self.parameters())}")
         return ParamRef(self, name, self.parameters()[name])
 
+    def unchanged_reason(self) -> str | None:
+        """Why these settings leave every frame as it was (say, night at daylight), in words, or
+        ``None``. Checked for a requirement's envelope edge, where no change means no test."""
+        return None
+
     # -- identity and JSON ---------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
         """``{"module": name, "version": v, "params": {...}}`` with JSON types only."""

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 import numbers
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -30,25 +30,29 @@ Worse = Literal["higher", "lower"]
 _DOMAINS = ("continuous", "integer", "choice", "vector", "flag", "text")
 
 
+Scale = Literal["linear", "log"]
+
+
 @dataclass(frozen=True)
 class SearchScale:
-    """How boundary search walks a parameter when that differs from the parameter itself.
+    """The range and spacing boundary search walks, always in the parameter's own unit.
 
-    Example: ``frame_drop.drop_rate`` (0..1) is searched in integer percent,
-    ``SearchScale("integer", 0, 100, "%", lambda p: p / 100)``.
+    Example: ``night.illuminance_lux`` is searched from 0.01 to 100000 lx on a ``log`` scale
+    (bisection takes the geometric mean ``sqrt(a b)``, so 1..100 lx is halved at 10 lx). Log
+    or linear is a detail of the search: bounds, ids, reports and history stay in lx.
 
     Attributes:
-        domain: ``continuous`` or ``integer`` search values.
-        min, max: search range in ``unit``.
-        unit: unit of the search value.
-        canonicalize: search value -> parameter value.
+        domain: ``continuous`` or ``integer`` values.
+        min, max: the default search range, in the parameter's unit.
+        unit: the parameter's unit.
+        scale: ``linear`` (arithmetic midpoints) or ``log`` (geometric midpoints; min > 0).
     """
 
     domain: Literal["continuous", "integer"]
     min: float
     max: float
     unit: str
-    canonicalize: Callable[[float], Any]
+    scale: Scale = "linear"
 
 
 class Param:
@@ -65,7 +69,10 @@ class Param:
         choices: allowed values of a ``choice`` parameter.
         length: number of components of a ``vector``.
         optional: ``None`` is a valid value (meaning "estimate" or "not set").
-        search: a ``SearchScale`` when search values differ from parameter values.
+        scale: ``log`` for a parameter that spans decades (lux, ISO, Mbit/s): the search
+            bisects it geometrically. Bounds and reports stay in ``unit`` either way.
+        search_range: the range the search walks by default when narrower than ``min .. max``
+            (in ``unit``).
         doc: one line for ``sal modules`` and error messages.
     """
 
@@ -82,13 +89,19 @@ class Param:
         choices: Sequence[Any] | None = None,
         length: int | None = None,
         optional: bool = False,
-        search: SearchScale | None = None,
+        scale: Scale = "linear",
+        search_range: tuple[float, float] | None = None,
         doc: str = "",
     ):
         if domain not in _DOMAINS:
             raise ValueError(f"domain must be one of {_DOMAINS}, got {domain!r}")
         if searchable and (domain not in ("continuous", "integer") or worse not in ("higher", "lower")):
             raise ValueError("a searchable parameter needs a continuous or integer domain and worse='higher'|'lower'")
+        if scale not in ("linear", "log"):
+            raise ValueError(f"scale must be 'linear' or 'log', got {scale!r}")
+        lowest = search_range[0] if search_range is not None else min
+        if scale == "log" and searchable and (lowest is None or lowest <= 0):
+            raise ValueError("a log-scale parameter needs a search range above 0")
         if domain == "choice" and not choices:
             raise ValueError("a choice parameter needs choices")
         if domain == "vector" and not length:
@@ -102,7 +115,8 @@ class Param:
         self.choices = tuple(choices) if choices is not None else None
         self.length = length
         self.optional = optional
-        self.search = search
+        self.scale: Scale = scale
+        self.search_range = None if search_range is None else (float(search_range[0]), float(search_range[1]))
         self.doc = doc
         self.name = ""
         self.owner: type | None = None
@@ -182,18 +196,19 @@ class Param:
         }
         if self.choices is not None:
             info["choices"] = list(self.choices)
-        if self.search is not None:
-            info["search"] = {"domain": self.search.domain, "min": self.search.min, "max": self.search.max, "unit": self.search.unit}
+        if self.searchable:
+            space = self.search_space()
+            info["search"] = {"domain": space.domain, "min": space.min, "max": space.max, "unit": space.unit, "scale": space.scale}
         return info
 
     def search_space(self) -> SearchScale:
-        """The scale boundary search walks (the parameter's own range unless ``search`` is set)."""
+        """The range and scale boundary search walks, in the parameter's unit (``search_range``
+        when declared, else the valid range)."""
         if not self.searchable:
             raise ParameterError(f"{self.qualname} is not searchable; searchable parameters are declared with searchable=True")
-        if self.search is not None:
-            return self.search
-        assert self.min is not None and self.max is not None
-        return SearchScale(self.domain, self.min, self.max, self.unit, lambda v: v)  # type: ignore[arg-type]
+        lo, hi = self.search_range or (self.min, self.max)
+        assert lo is not None and hi is not None
+        return SearchScale(self.domain, float(lo), float(hi), self.unit, self.scale)  # type: ignore[arg-type]
 
     # -- validation ----------------------------------------------------------------------------
     def validate(self, value: Any, module: str | None = None) -> Any:

@@ -47,13 +47,22 @@ class ParamRef:
 
     @property
     def unit(self) -> str:
-        """Unit of the values a bound or search uses (the search scale's, e.g. ``%`` for drop_rate)."""
-        return self.param.search.unit if self.param.search is not None else self.param.unit
+        """The parameter's unit: the unit of every bound, search value, id and report cell."""
+        return self.param.unit
 
     def module(self, value: Any) -> Perturbation:
-        """The configured module (or chain) with this parameter set to ``value`` (module units)."""
+        """The configured module (or chain) with this parameter set to ``value`` (its unit)."""
         base = self.target() if isinstance(self.target, type) else self.target
         return base.with_params(**{self.address: value})
+
+    def unchanged_at(self, value: Any) -> str | None:
+        """Why the module owning this parameter leaves the frames unchanged at ``value``
+        (``Perturbation.unchanged_reason``), or ``None``."""
+        module = self.module(value)
+        steps = getattr(module, "steps", None)
+        if steps is not None:  # a chain: the step that owns the parameter
+            module = steps[module.param(self.address)[0]]
+        return module.unchanged_reason()
 
     def _bound(self, op: str, value: Any) -> Bound:
         if not isinstance(value, numbers.Real) or isinstance(value, bool):

@@ -218,6 +218,9 @@ class SlamSystem:
     description: ClassVar[str] = ""
     #: bumped when a change of the implementation changes results (cache keys)
     version: ClassVar[int] = 1
+    #: the same input gives the same result every run (one run per trial is enough); a noisy
+    #: system (threads, RANSAC) gets a vote of several runs per trial
+    deterministic: ClassVar[bool] = False
 
     def options(self) -> dict[str, Any]:
         """The configured options (JSON-ready)."""

@@ -71,6 +71,7 @@ class ReferenceVO(SlamSystem):
     description = "Built-in deterministic visual odometry (ORB or KLT, PnP on depth, stereo or triangulated points)"
     #: bump when a change of the VO code changes results (identity() also hashes source_files())
     version = 1
+    deterministic = True
 
     def __init__(
         self,

@@ -83,10 +83,10 @@ def test_boundary_brackets_the_known_failure_point_and_a_rerun_is_all_cached(tmp
     assert summary["trials_used"] == len(trials) <= 10
     assert summary["linear_sweep_trials"] == 96 > len(trials)
     # one progress line per trial, in order, and the summary line with both counts
-    lines = [line for line in out.splitlines() if line.lstrip().startswith("trial ")]
+    lines = [line for line in out.splitlines() if line.lstrip().startswith("step ")]
     assert len(lines) == len(trials)
     assert all(f"{t['value']:g} m" in line and ("PASS" if t["verdict"] == "pass" else "FAIL") in line for t, line in zip(trials, lines))
-    assert f"{len(trials)} trials (0 cached) vs 96 for a linear sweep" in out
+    assert f"{len(trials)} trials, {len(trials)} runs (0 trials cached) vs 96 for a linear sweep" in out
     assert (folder / "boundary_plot.png").stat().st_size > 10_000
 
     # a second run reads every trial from the cache and finds the same boundary
@@ -95,7 +95,7 @@ def test_boundary_brackets_the_known_failure_point_and_a_rerun_is_all_cached(tmp
     assert [t["value"] for t in again["trials"]] == [t["value"] for t in trials]
     assert all(t["cached"] for t in again["trials"])
     assert (again["pass_value"], again["fail_value"]) == (summary["pass_value"], summary["fail_value"])
-    assert f"{len(trials)} trials ({len(trials)} cached)" in capsys.readouterr().out
+    assert f"{len(trials)} trials, {len(trials)} runs ({len(trials)} trials cached)" in capsys.readouterr().out
 
 
 def test_a_composite_parameter_is_searched_by_its_address(tmp_path: Path) -> None:

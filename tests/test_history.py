@@ -341,7 +341,7 @@ def test_history_listing(filled: Path, capsys: pytest.CaptureFixture[str]) -> No
     assert lines[0].startswith(f"{filled}: 5 runs, 0001 (") and ") .. 0005 (" in lines[0]
     assert lines[1].split() == ["test", "system", "dataset", "run", "boundary", "verdict", "change", "since", "the", "run", "before"]
     assert cells(lines[2]) == [FOG, "orbslam3", "kitti-07", "0005", "16-18 m", "passed", "passes now (failed everywhere searched before)"]
-    assert cells(lines[3]) == [DROP, "orbslam3", "kitti-07", "0003", "28-30 %", "passed", "unchanged"]
+    assert cells(lines[3]) == [DROP, "orbslam3", "kitti-07", "0003", "0.28-0.3", "passed", "unchanged"]
 
 
 def test_history_change_text(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -349,7 +349,7 @@ def test_history_change_text(tmp_path: Path, capsys: pytest.CaptureFixture[str])
     save(History(tmp_path), [fog(22, 20), drop(33, 35)])
     assert main(["history", "--history-dir", str(tmp_path), "--system", "orbslam3"]) == 0
     out = capsys.readouterr().out
-    assert "pass 15 -> 22 m, +47 % (worse)" in out and "pass 30 -> 33 %, +10 % (better)" in out
+    assert "pass 15 -> 22 m, +47 % (worse)" in out and "pass 0.3 -> 0.33, +10 % (better)" in out
 
 
 def test_history_of_one_test_and_its_plot(filled: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:

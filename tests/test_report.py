@@ -107,9 +107,8 @@ def flaky() -> Outcome:
         boundary=Boundary(15.0, 30.0, "px"),
         termination="max_trials",
         trials=[
-            Trial(15.0, True, m(0.08, 0.98)),
+            Trial(15.0, False, m(0.12, 0.97), runs=[{"passed": p} for p in (True, False, False, True, False)], failed=["ate_rmse < 0.1 m"]),
             Trial(30.0, False, m(0.4, 0.9), failed=["ate_rmse < 0.1 m"]),
-            Trial(15.0, False, m(0.12, 0.97), repeat=True, failed=["ate_rmse < 0.1 m"]),
         ],
         margin=0.0,
         reproduction="sal run orbslam3 tum/fr1_desk --perturb 'motion_blur(length_px=15)'",
@@ -195,7 +194,8 @@ def test_terminal_table_fits_and_truncates_ids_from_the_left(outcomes: list[Outc
     lines = terminal_table([*outcomes, long])
     assert all(len(line) <= 120 for line in lines)
     header = lines[0].split()
-    assert header == ["test", "system", "parameter", "requirement", "boundary", "trials", "margin", "change", "verdict"]
+    full = ["test", "system", "parameter", "requirement", "boundary", "trials", "votes", "margin", "change", "verdict"]
+    assert len(header) == len(full) and all(f.startswith(h.rstrip("…")) for h, f in zip(header, full))  # squeezed, not dropped
     assert set(lines[1]) <= {"-", " "} and len(lines) == 2 + 6
     assert "6 (6 cached)" in lines[2] and "13.67-15.12 m" in lines[2] and ">= 25 m" in lines[2] and "+1.61 m" in lines[2]
     assert "REGRESSED" in lines[5] and "FLAKY" in lines[4]
@@ -212,7 +212,7 @@ def test_markdown_has_counts_table_and_details_only_where_needed(outcomes: list[
     text = markdown_report(outcomes)
     assert headline(outcomes) == "5 robustness requirements: 1 passed, 3 failed (1 regressed), 1 flaky"
     assert "**5 robustness requirements: 1 passed, 3 failed (1 regressed), 1 flaky**" in text
-    assert "| test | system | parameter | requirement | boundary | trials | margin | change | verdict |" in text
+    assert "| test | system | parameter | requirement | boundary | trials | votes | margin | change | verdict |" in text
     assert text.count("\n| `test_") == 5
     sections = re.findall(r"^### .*$", text, flags=re.MULTILINE)
     assert len(sections) == 4
@@ -228,7 +228,7 @@ def test_markdown_has_counts_table_and_details_only_where_needed(outcomes: list[
     assert "<script>" not in text.replace("`test_weather.py::test_rain[<script>alert(1)</script>]`", "").replace(
         f"`{XSS_ID}`", ""
     )  # raw only inside code spans
-    assert all(line.count("|") - line.count("\\|") in (0, 10) for line in text.splitlines() if line.startswith("| ") and "test |" in line)
+    assert all(line.count("|") - line.count("\\|") in (0, 11) for line in text.splitlines() if line.startswith("| ") and "test |" in line)
     path = write_markdown(outcomes, tmp_path / "out" / "summary.md")
     assert path.read_text(encoding="utf-8") == text
     assert [p.name for p in path.parent.iterdir()] == ["summary.md"]

@@ -340,10 +340,11 @@ def test_frame_drop_periodic_drops_exactly_every_period_th_frame(long_street: Se
     assert dropped(long_street, mode="periodic", period=1) == set(range(2000))
 
 
-def test_frame_drop_searches_integer_percent() -> None:
+def test_frame_drop_is_searched_in_its_own_unit_a_share_of_the_frames() -> None:
+    # one unit for drop_rate in create(), YAML, the DSL and reports: a share 0 .. 1
     scale = FrameDrop.drop_rate.search_space()
-    assert (scale.domain, scale.min, scale.max, scale.unit) == ("integer", 0, 100, "%")
-    assert scale.canonicalize(30) == 0.3 and scale.canonicalize(0) == 0.0 and scale.canonicalize(100) == 1.0
+    assert (scale.domain, scale.min, scale.max, scale.unit, scale.scale) == ("continuous", 0.0, 1.0, "", "linear")
+    assert create("frame_drop", drop_rate=0.3).drop_rate == 0.3
     assert FrameDrop.drop_rate.worse == "higher"
     with pytest.raises(ParameterError, match="drop_rate"):
         create("frame_drop", drop_rate=1.5)

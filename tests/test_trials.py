@@ -62,3 +62,63 @@ def test_cache_frames_gives_systems_the_stored_copy(tmp_path: Path) -> None:
         assert not trial.cached
     assert [json.loads(line)["value"] for line in calls.read_text().splitlines()] == [30.0, 30.0]
     assert ContentCache(tmp_path / "cache").stats()["folders"] == 1
+
+
+def test_a_noisy_system_votes_until_one_verdict_leads_by_two(tmp_path: Path) -> None:
+    # the flaky fake alternates 0.5 and 0.5 + 0.3 tracked at 20 m: against tracking_rate >= 0.6
+    # its runs vote fail, pass, fail, pass, ... and never lead by 2: the trial spends its 5 runs
+    calls = tmp_path / "calls.jsonl"
+    noisy = runner(tmp_path, FakeSlam(flaky=0.3, calls_file=str(calls)))
+    noisy.requirement = Requirement.build([tracking_rate >= 0.6, fog.visibility_m >= 25])
+    trial = noisy.evaluate(20.0)
+    assert [r["passed"] for r in trial.runs] == [False, True, False, True, False] and not trial.passed
+    assert trial.votes() == "3 of 5 runs failed" and not noisy.settled(trial)
+    # the same fake at 40 m tracks everything in every run: 2 runs settle it
+    steady = noisy.evaluate(40.0)
+    assert len(steady.runs) == 2 and steady.passed and noisy.settled(steady)
+    # confirming asks for a lead of 3: one more run (each run is its own cache entry)
+    assert noisy.confirm(steady) and len(steady.runs) == 3
+    again = runner(tmp_path, FakeSlam(flaky=0.3, calls_file=str(calls)))
+    again.requirement = noisy.requirement
+    before = len(calls.read_text().splitlines())
+    reread = again.evaluate(40.0)
+    again.confirm(reread)
+    assert reread.cached and len(reread.runs) == 3 and len(calls.read_text().splitlines()) == before
+
+
+def test_a_starved_run_does_not_vote_against_the_system(tmp_path: Path) -> None:
+    from sal_wrappers import RunResult
+
+    class Starved(FakeSlam):
+        """Every other run falls behind the sensor clock and tracks nothing."""
+
+        def run(self, sequence, workdir, timeout=None):  # type: ignore[no-untyped-def]
+            result = super().run(sequence, workdir, timeout)
+            if self._runs % 2:
+                data = result.to_dict()
+                data.update(states=["lost"] * len(result.states), trajectory=None, fell_behind=True)
+                return RunResult.from_dict(data)
+            return result
+
+    starved = runner(tmp_path, Starved(tracked="1"))
+    starved.policy = type(starved.policy)(max_runs=5)
+    trial = starved.evaluate(40.0)
+    assert [r["abstained"] for r in trial.runs] == [True, False, True, False]  # runs 1 and 3 were starved
+    assert trial.passed and trial.passes == 2 and trial.fails == 0 and trial.abstained == 2
+    assert trial.votes() == "2 of 2 runs passed (2 starved by the machine, not counted)"
+
+
+def test_an_edge_that_leaves_the_dataset_unchanged_is_refused_before_any_run(tmp_path: Path) -> None:
+    # fog at 100 km in a room (depths under 10 m): 255 x (1 - exp(-3.912 x 10 / 1e5)) = 0.1 grey levels
+    import pytest
+
+    from pytest_sal.requirements import InvalidRequirement
+    from pytest_sal.robustness import SearchSettings, search_outcome
+
+    calls = tmp_path / "calls.jsonl"
+    room = runner(tmp_path, FakeSlam(calls_file=str(calls)))
+    requirement = Requirement.build([tracking_rate >= 0.5, fog.visibility_m >= 100_000])
+    with pytest.raises(InvalidRequirement, match=r"fog.visibility_m >= 100000 m: the envelope's edge leaves the frames of .* unchanged \(frames 0, 4, 7"):
+        search_outcome(room, requirement, SearchSettings(), "test_room")
+    assert not calls.exists()
+    assert room.unchanged_frames(25.0) is None  # 25 m fog does change the room

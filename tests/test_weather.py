@@ -359,7 +359,9 @@ def test_drops_behind_a_surface_are_hidden() -> None:
     wall[: int(seq.camera.cy)] = 1.5  # a near surface over the streak's upper half
     split = rain.coverage(drop, wall, "left")
     rows = split.sum(axis=1)
-    assert rows[: int(seq.camera.cy) - 3].max() == 0.0 and rows[int(seq.camera.cy) + 1 :].max() > 0.02  # (2 px of blur)
+    # hidden rows are 0 up to float32 rounding: OpenCV sums the splats in parallel, and in
+    # another order on a busy machine, which can leave one ulp (1.2e-07 seen); a visible row is > 0.02
+    assert rows[: int(seq.camera.cy) - 3].max() <= 1e-6 and rows[int(seq.camera.cy) + 1 :].max() > 0.02  # (2 px of blur)
     # the real drop pool: a surface 1 m away hides every drop behind it
     many = ready(Rain(intensity_mm_h=100.0), seq).particles(0)
     near = rain.coverage(many, np.full(shape, 1.0, np.float32), "left")

@@ -19,10 +19,10 @@ def test_bandwidth(sal_outcome):
     assert sal_outcome.boundary.pass_value <= 0.5
 
 
-@sal.require(*ROOM_ACCURACY, frame_drop.drop_rate <= 30, tolerance=5)
+@sal.require(*ROOM_ACCURACY, frame_drop.drop_rate <= 0.3, tolerance=0.05)
 def test_frame_drop(sal_outcome):
-    """Up to 30 % of the frames lost at random. ``drop_rate`` is searched in integer percent
-    (the module's own value is 0..1): the bound, tolerance and boundary are in %."""
+    """Up to 30 % of the frames lost at random. ``drop_rate`` is a share of the frames (0..1),
+    as in ``create("frame_drop", drop_rate=0.3)`` and YAML: so are the bound, tolerance and boundary."""
 
 
 @sal.require(*ROOM_ACCURACY, jpeg.quality >= 20)

@@ -59,7 +59,7 @@ from sal_modules.light.sensor import (
     read_noise_param,
     white_balance,
 )
-from sal_modules.params import Param, SearchScale
+from sal_modules.params import Param
 
 __all__ = ["Exposure", "ImageTranslator", "Night", "auto_exposure"]
 
@@ -99,8 +99,8 @@ class Night(SensorModule):
 
     illuminance_lux = Param(
         5.0, unit="lx", min=0.01, max=150_000.0, searchable=True, worse="lower",
-        search=SearchScale("continuous", -2.0, 5.0, "log10 lx", lambda decade: 10.0**decade),
-        doc="scene illuminance (street lighting ~5-20 lx, full moon ~0.2 lx); searched in log10 lx",
+        scale="log", search_range=(0.01, 100_000.0),
+        doc="scene illuminance (street lighting ~5-20 lx, full moon ~0.2 lx); at or above daylight_lux the frames are unchanged",
     )
     daylight_lux = Param(10_000.0, unit="lx", min=1.0, max=150_000.0, doc="illuminance the clean frames were taken at")
     max_exposure_factor = Param(
@@ -127,6 +127,18 @@ class Night(SensorModule):
     def cleanup(self) -> None:
         self._translator = None
         super().cleanup()
+
+    def unchanged_reason(self) -> str | None:
+        """Down to daylight_lux / max_exposure_factor the longer exposure makes up for all the
+        light lost: brightness and noise stay those of the clean frames."""
+        full = self.daylight_lux / self.max_exposure_factor
+        if self.model is None and self.illuminance_lux >= full:
+            return (
+                f"at illuminance_lux = {self.illuminance_lux:g} lx the auto-exposure makes up for all the light lost "
+                f"(down to daylight_lux / max_exposure_factor = {self.daylight_lux:g} / {self.max_exposure_factor:g} = {full:g} lx "
+                f"the frames keep their brightness and noise; only the lamp colour changes)"
+            )
+        return None
 
     def exposure(self) -> Exposure:
         """The auto-exposure at the configured light level."""

@@ -32,7 +32,7 @@ from sal_modules.light.sensor import (
     full_well_param,
     read_noise_param,
 )
-from sal_modules.params import Param, SearchScale
+from sal_modules.params import Param
 
 __all__ = ["SensorNoise"]
 
@@ -46,8 +46,8 @@ class SensorNoise(SensorModule):
 
     iso = Param(
         800.0, unit="ISO", min=25.0, max=409_600.0, searchable=True, worse="higher",
-        search=SearchScale("continuous", 0.0, 8.0, "stops above ISO 100", lambda stops: 100.0 * 2.0**stops),
-        doc="sensitivity setting; searched in stops above ISO 100 (100 .. 25600)",
+        scale="log", search_range=(100.0, 25_600.0),
+        doc="sensitivity setting (searched from ISO 100 to 25600)",
     )
     base_iso = Param(100.0, unit="ISO", min=25.0, max=409_600.0, doc="ISO of the clean frames (unit gain)")
     full_well_e = full_well_param()

@@ -59,6 +59,9 @@ class MotionBlur(Perturbation):
         """Forward distance dz (m) the camera covers during the exposure."""
         return self.speed_kmh / 3.6 * self.exposure_ms / 1000.0
 
+    def unchanged_reason(self) -> str | None:
+        return "speed_kmh = 0 km/h does not move the camera during the exposure" if self.speed_kmh == 0.0 else None
+
     def apply(self, image: np.ndarray, depth: np.ndarray | None, index: int, stream: str) -> np.ndarray:
         camera = self.ready_context().camera_for(stream)
         dz = self.travel_m

@@ -48,6 +48,9 @@ class RollingShutter(Perturbation):
         doc="image motion from ground-truth poses and depth, from optical flow, or poses when available (auto)",
     )
 
+    def unchanged_reason(self) -> str | None:
+        return "readout_ms = 0 ms reads every row at once (a global shutter)" if self.readout_ms == 0.0 else None
+
     def setup(self, context: ModuleContext) -> None:
         super().setup(context)
         sequence = context.sequence

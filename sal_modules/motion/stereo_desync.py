@@ -45,6 +45,9 @@ class StereoDesync(Perturbation):
 
     delay_ms = Param(50.0, unit="ms", min=0.0, max=1000.0, searchable=True, worse="higher", doc="how much later the right camera captures")
 
+    def unchanged_reason(self) -> str | None:
+        return "delay_ms = 0 ms captures both cameras at once" if self.delay_ms == 0.0 else None
+
     def setup(self, context: ModuleContext) -> None:
         super().setup(context)
         sequence = context.sequence

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from sal_modules.base import ModuleContext, Perturbation
-from sal_modules.params import Param, SearchScale
+from sal_modules.params import Param
 
 __all__ = ["FrameDrop"]
 
@@ -26,11 +26,15 @@ class FrameDrop(Perturbation):
 
     drop_rate = Param(
         0.1, unit="", min=0.0, max=1.0, searchable=True, worse="higher",
-        search=SearchScale("integer", 0, 100, "%", lambda percent: percent / 100.0),
-        doc="share of frames dropped (random mode); searched in integer percent",
+        doc="share of the frames dropped in random mode (0.3 drops 30 %)",
     )
     mode = Param("random", domain="choice", choices=("random", "periodic"), doc="random or periodic drops")
     period = Param(10, domain="integer", unit="frames", min=1, max=100_000, doc="periodic mode: drop every period-th frame")
+
+    def unchanged_reason(self) -> str | None:
+        if self.mode == "random" and self.drop_rate == 0.0:
+            return "drop_rate = 0 drops no frame"
+        return None
 
     def setup(self, context: ModuleContext) -> None:
         super().setup(context)
