@@ -22,6 +22,7 @@ from typing import Any, TypeVar
 import pytest
 
 from pytest_sal.requirements import InvalidRequirement, Requirement
+from sal_adapters.errors import SalError
 from sal_modules.refs import ParamRef
 
 __all__ = ["at", "dataset_fixture", "require", "sweep"]
@@ -132,9 +133,10 @@ def _ref(param: Any, where: str) -> ParamRef:
 def _check_value(ref: ParamRef, value: Any, where: str) -> None:
     if not isinstance(value, numbers.Real) or isinstance(value, bool):
         raise InvalidRequirement(f"{where}: {ref.label} needs a number in {ref.unit or 'its unit'}, got {value!r}")
-    scale = ref.param.search_space()
-    if not scale.min <= float(value) <= scale.max:
-        raise InvalidRequirement(f"{where}: {ref.label} = {value!r} is outside {scale.min:g} .. {scale.max:g} {scale.unit}".rstrip())
+    try:  # any valid value, in the parameter's unit (the search range only bounds searches)
+        ref.param.validate(float(value), ref.label)
+    except SalError as exc:
+        raise InvalidRequirement(f"{where}: {exc}") from None
 
 
 def _resolve(address: str) -> ParamRef:

@@ -127,6 +127,10 @@ def _run_modules(args: argparse.Namespace) -> int:
             print(f"  [{', '.join(flags)}]")
         for p in info["parameters"]:
             search = f"  searchable, worse when {p['worse']}" if p["searchable"] else ""
+            space = p.get("search") or {}
+            if space and (space["scale"] == "log" or (space["min"], space["max"]) != (p["min"], p["max"])):
+                unit = f" {space['unit']}" if space["unit"] else ""
+                search += f", searched {space['min']:g} .. {space['max']:g}{unit}" + (" on a log scale" if space["scale"] == "log" else "")
             print(f"  {p['name']:<22} {_range_text(p):<28} default {json.dumps(p['default'])}{search}")
             if p["doc"]:
                 print(f"  {'':<22} {p['doc']}")

@@ -273,3 +273,22 @@ def test_comparing_with_a_string_is_an_error_naming_the_unit() -> None:
         ate_rmse < "1.5"  # noqa: B015
     with pytest.raises(TypeError, match=r"compare a parameter with a number in m"):
         fog.visibility_m >= "25"  # noqa: B015
+
+
+def test_sal_at_and_sweep_values_are_the_module_values_in_its_unit() -> None:
+    # sal.at(night.illuminance_lux, 1) ran at 10 lx while its id said 1 (a log10 search unit)
+    @sal.at(night.illuminance_lux, 1)
+    @sal.require(tracking_rate >= 0.9)
+    def test_dark(sal_trial): ...
+
+    @sal.sweep(sensor_noise.iso, L=200, H=6400)
+    @sal.require(tracking_rate >= 0.9)
+    def test_iso(sal_trial): ...
+
+    ref, levels = test_dark.sal_levels
+    assert levels == {"at": 1.0} and ref.module(levels["at"]).illuminance_lux == 1.0
+    ref, levels = test_iso.sal_levels
+    assert [ref.module(v).iso for v in levels.values()] == [200.0, 6400.0]
+    assert sal.sweep(sensor_noise.iso, L=50)  # below the search range, still a valid ISO
+    with pytest.raises(InvalidRequirement, match=r"sal.sweep level L: sensor_noise.iso: iso = 5.0 ISO is not valid; .* must be a number in 25 .. 409600 ISO"):
+        sal.sweep(sensor_noise.iso, L=5)

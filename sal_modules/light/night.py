@@ -100,7 +100,7 @@ class Night(SensorModule):
     illuminance_lux = Param(
         5.0, unit="lx", min=0.01, max=150_000.0, searchable=True, worse="lower",
         scale="log", search_range=(0.01, 100_000.0),
-        doc="scene illuminance (street lighting ~5-20 lx, full moon ~0.2 lx); at or above daylight_lux the frames are unchanged",
+        doc="scene illuminance (street lighting ~5-20 lx, full moon ~0.2 lx); unchanged frames from daylight_lux / max_exposure_factor up",
     )
     daylight_lux = Param(10_000.0, unit="lx", min=1.0, max=150_000.0, doc="illuminance the clean frames were taken at")
     max_exposure_factor = Param(

@@ -47,7 +47,7 @@ class SensorNoise(SensorModule):
     iso = Param(
         800.0, unit="ISO", min=25.0, max=409_600.0, searchable=True, worse="higher",
         scale="log", search_range=(100.0, 25_600.0),
-        doc="sensitivity setting (searched from ISO 100 to 25600)",
+        doc="sensitivity setting",
     )
     base_iso = Param(100.0, unit="ISO", min=25.0, max=409_600.0, doc="ISO of the clean frames (unit gain)")
     full_well_e = full_well_param()
