@@ -116,7 +116,7 @@ LOG_NAME = "run.log"
 _TOKEN = re.compile(r"\{\{|\}\}|\{([A-Za-z_][A-Za-z0-9_]*)\}")
 _OPTIONS = (
     "argv", "prefix", "output", "output_format", "time_unit", "keyframes", "layout", "sensor", "mode", "grayscale",
-    "stage_dir", "settings", "env", "cwd", "name", "version", "depends",
+    "stage_dir", "settings", "env", "cwd", "name", "version", "depends", "deterministic",
 )
 _NAME = re.compile(r"[A-Za-z0-9._-]{1,64}")
 #: Most a ``depends`` folder may hold (its files are hashed for the cache key).
@@ -219,6 +219,10 @@ class CommandSystem(SlamSystem):
         self.keyframes = options.get("keyframes", False)
         if not isinstance(self.keyframes, bool):
             raise SlamSystemError(f"command: keyframes must be True or False, got {self.keyframes!r}")
+        deterministic = options.get("deterministic", False)
+        if not isinstance(deterministic, bool):
+            raise SlamSystemError(f"command: deterministic must be True or False, got {deterministic!r}")
+        self.deterministic = deterministic  # type: ignore[misc]  # True: one run per trial, no votes
 
         self.layout = options.get("layout")
         if self.layout is not None and (not isinstance(self.layout, str) or self.layout not in DATASETS.names()):
@@ -334,6 +338,7 @@ class CommandSystem(SlamSystem):
             "name": self.name,
             "version": self.program_version,
             "depends": [str(p) for p in self.depends],
+            "deterministic": self.deterministic,
         }
 
     def identity(self) -> dict[str, Any]:

@@ -609,3 +609,14 @@ def test_a_too_big_depends_folder_is_a_clear_error(tmp_path, monkeypatch):
     monkeypatch.setattr(command, "DEPENDS_MAX_FILES", 2)
     with pytest.raises(SlamSystemError, match="depends folder .* holds more than 2 files"):
         create("command", argv=["slam"], depends=[str(lib)]).identity()
+
+
+def test_a_command_system_is_noisy_unless_it_says_it_is_deterministic() -> None:
+    from pytest_sal.trials import VotePolicy
+
+    noisy = create("command", argv=["true"])
+    steady = create("command", argv=["true"], deterministic=True)
+    assert VotePolicy.for_system(noisy, None).max_runs == 5 and VotePolicy.for_system(steady, None).max_runs == 1
+    assert steady.options()["deterministic"] and steady.identity() != noisy.identity()
+    with pytest.raises(SlamSystemError, match="deterministic must be True or False, got 'yes'"):
+        create("command", argv=["true"], deterministic="yes")
