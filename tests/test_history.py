@@ -401,3 +401,25 @@ def test_history_figure_has_log_scale_for_wide_ranges(filled: Path) -> None:
     assert history_figure(wide).axes[0].get_yscale() == "log"
     with pytest.raises(SalError, match="nothing to plot"):
         history_figure([])
+
+
+def test_history_in_an_old_search_unit_is_converted_and_another_unit_is_refused() -> None:
+    # night.illuminance_lux was stored in log10 lx: 0.699 is 5 lx, a pass at 1.5 is 31.6 lx
+    old = {
+        "test_id": "t::night", "system": "orbslam3", "dataset": "kitti/07", "parameter": "night.illuminance_lux", "worse": "lower",
+        "edge": 0.69897, "requirement": "tracking_rate >= 0.9 wherever night.illuminance_lux >= 0.699 log10 lx",
+        "envelope": ">= 0.699 log10 lx", "verdict": "failed", "termination": "tolerance",
+        "boundary": {"pass_value": 1.5, "fail_value": 1.4, "unit": "log10 lx"},
+        "trials": [{"value": 0.69897, "passed": False, "repeat": False}],
+    }
+    outcome = Outcome.from_dict(old)
+    assert outcome.boundary.unit == "lx" and outcome.boundary.pass_value == pytest.approx(10**1.5)
+    assert outcome.edge == pytest.approx(5.0, rel=1e-4) and outcome.trials[0].value == pytest.approx(5.0, rel=1e-4)
+    assert outcome.envelope == ">= 5 lx" and outcome.requirement.endswith("wherever night.illuminance_lux >= 5 lx")
+    assert outcome.margin == pytest.approx(5.0 - 10**1.5, rel=1e-4)
+    # a unit the converter does not know is never compared silently
+    now = fog(15, 14)
+    before = fog(15, 14, boundary=Boundary(15, 14, "ft"))
+    assert regressions([BoundaryCheck(10.0, True)], now, before) == [
+        "not compared: the history has fog.visibility_m in 'ft', this run in 'm'; save a new baseline with --sal-save"
+    ]
