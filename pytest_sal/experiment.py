@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import os
 import re
+import reprlib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from datetime import datetime
@@ -54,8 +55,8 @@ __all__ = [
 #: name of the clean sequence in every output tree (a perturbation of another type may not take it)
 BASELINE = "baseline"
 
-SAFE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
-SAFE_NAME_TEXT = "letters, digits, '_', '-', '.' (not first)"
+SAFE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,99}")
+SAFE_NAME_TEXT = "1 to 100 letters, digits, '_', '-', '.' (not first)"
 
 
 class ConfigError(SalError, ValueError):
@@ -165,7 +166,19 @@ _BOUNDARY = (
 
 
 class _UniqueKeyLoader(yaml.SafeLoader):
-    """SafeLoader that refuses a key given twice in one mapping."""
+    """SafeLoader that refuses a key given twice in one mapping, and nesting deeper than
+    ``MAX_DEPTH`` while it composes (before Python's recursion limit)."""
+
+    depth = 0
+
+    def compose_node(self, parent: Any, index: Any) -> Any:
+        self.depth += 1
+        try:
+            if self.depth > MAX_DEPTH:
+                raise _TooBig(f":{self.peek_event().start_mark.line + 1}", f"nested deeper than {MAX_DEPTH} levels; a config needs a few")
+            return super().compose_node(parent, index)
+        finally:
+            self.depth -= 1
 
 
 def _construct_mapping(loader: yaml.SafeLoader, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
@@ -174,13 +187,66 @@ def _construct_mapping(loader: yaml.SafeLoader, node: yaml.MappingNode, deep: bo
         key = loader.construct_object(key_node, deep=deep)
         if key in seen:
             raise yaml.constructor.ConstructorError(
-                None, None, f"key {key!r} appears twice (first on line {seen[key] + 1})", key_node.start_mark
+                None, None, f"key {_quote(key)} appears twice (first on line {seen[key] + 1})", key_node.start_mark
             )
         seen[key] = key_node.start_mark.line
     return loader.construct_mapping(node, deep=deep)
 
 
 _UniqueKeyLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
+
+#: Limits a config is checked against before anything is built: the file's size, how deep
+#: mappings and lists nest, the values it holds once YAML aliases are expanded (a "billion
+#: laughs" alias chain holds 10^9), the perturbations and the frames of a dataset.
+MAX_CONFIG_BYTES = 1_000_000
+MAX_DEPTH = 32
+MAX_VALUES = 100_000
+MAX_PERTURBATIONS = 256
+MAX_FRAMES = 1_000_000
+#: Characters of a value quoted in an error message.
+QUOTE_CHARS = 80
+
+
+class _TooBig(Exception):
+    """A config over one of the limits (``where`` names the line)."""
+
+    def __init__(self, where: str, message: str):
+        super().__init__(message)
+        self.where = where
+
+
+def _check_size(node: yaml.Node) -> None:
+    """Refuse nesting deeper than ``MAX_DEPTH`` and more than ``MAX_VALUES`` values once
+    aliases are expanded, counted on the composed node graph (shared nodes counted once per
+    use, each node visited once)."""
+    expanded: dict[int, int] = {}
+
+    def count(n: yaml.Node, depth: int) -> int:
+        if depth > MAX_DEPTH:
+            raise _TooBig(f":{n.start_mark.line + 1}", f"nested deeper than {MAX_DEPTH} levels; a config needs a few")
+        if id(n) in expanded:
+            return expanded[id(n)]
+        children: list[yaml.Node] = []
+        if isinstance(n, yaml.MappingNode):
+            children = [c for pair in n.value for c in pair]
+        elif isinstance(n, yaml.SequenceNode):
+            children = list(n.value)
+        total = 1 + sum(count(c, depth + 1) for c in children)
+        if total > MAX_VALUES:
+            raise _TooBig(
+                f":{n.start_mark.line + 1}",
+                f"holds more than {MAX_VALUES} values once its YAML aliases are expanded; a config needs a few hundred",
+            )
+        expanded[id(n)] = total
+        return total
+
+    count(node, 0)
+
+
+def _quote(value: Any) -> str:
+    """``repr(value)``, cut to ``QUOTE_CHARS`` characters (errors quote, they do not dump)."""
+    text = reprlib.repr(value) if isinstance(value, (dict, list, tuple, set)) else repr(value)
+    return text if len(text) <= QUOTE_CHARS else text[: QUOTE_CHARS - 3] + "..."
 
 
 def load_config(path: str | os.PathLike[str]) -> ExperimentConfig:
@@ -196,9 +262,22 @@ def load_config(path: str | os.PathLike[str]) -> ExperimentConfig:
 
 
 def parse_config(text: str, source: str = "<config>") -> ExperimentConfig:
-    """Validate the YAML ``text`` (``source`` names it in errors)."""
+    """Validate the YAML ``text`` (``source`` names it in errors) within the limits above."""
+    if len(text.encode("utf-8", "replace")) > MAX_CONFIG_BYTES:
+        raise ConfigError(source, "", f"the config is {len(text.encode('utf-8', 'replace'))} bytes; the limit is {MAX_CONFIG_BYTES} bytes")
     try:
-        data = yaml.load(text, Loader=_UniqueKeyLoader)  # a SafeLoader subclass
+        loader = _UniqueKeyLoader(text)  # a SafeLoader subclass
+        try:
+            node = loader.get_single_node()
+            if node is not None:
+                _check_size(node)
+            data = loader.construct_document(node) if node is not None else None
+        finally:
+            loader.dispose()
+    except _TooBig as exc:
+        raise ConfigError(f"{source}{exc.where}", "", str(exc)) from None
+    except RecursionError:
+        raise ConfigError(source, "", f"nested deeper than {MAX_DEPTH} levels; a config needs a few") from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
         line = f":{mark.line + 1}" if mark is not None else ""
@@ -256,13 +335,20 @@ class _Parser:
         if optional:
             words += " or null"
         if not ok or (minimum is not None and value < minimum):
-            raise self.error(where, f"{value!r} is not valid; must be {words}")
+            raise self.error(where, f"{_quote(value)} is not valid; must be {words}")
         return float(value) if kind == "number" else value
+
+    def frame_count(self, value: Any, where: str) -> int | None:
+        """An optional frame count, 1 .. ``MAX_FRAMES``."""
+        count = self.typed(value, where, "int", optional=True, minimum=1)
+        if count is not None and count > MAX_FRAMES:
+            raise self.error(where, f"{count} is not valid; the limit is {MAX_FRAMES} frames")
+        return count
 
     def safe_name(self, value: Any, where: str) -> str:
         self.typed(value, where, "str")
-        if not SAFE_NAME.match(value):
-            raise self.error(where, f"{value!r} cannot be a folder name; use {SAFE_NAME_TEXT}")
+        if not SAFE_NAME.fullmatch(value):  # fullmatch: "name\n" is refused too (match's $ allows it)
+            raise self.error(where, f"{_quote(value)} cannot be a folder name; use {SAFE_NAME_TEXT}")
         return value
 
     # -- sections
@@ -294,7 +380,7 @@ class _Parser:
         kind = self.typed(d["type"], "dataset.type", "str")
         names = DATASETS.names()
         if kind not in names:
-            raise self.error("dataset.type", f"unknown dataset kind {kind!r}; known: {', '.join(names)}")
+            raise self.error("dataset.type", f"unknown dataset kind {_quote(kind)}; known: {', '.join(names)}")
         allowed = DATASETS.get(kind).option_names()
         path = self.typed(d.get("path"), "dataset.path", "str", optional=True)
         folder = None
@@ -304,25 +390,28 @@ class _Parser:
                 what = "is not a folder" if folder.exists() else "does not exist"
                 raise self.error("dataset.path", f"{str(folder)!r} {what}; give the dataset folder")
         elif kind != "synthetic":
-            raise self.error("dataset.path", f"is required for dataset kind {kind!r}")
+            raise self.error("dataset.path", f"is required for dataset kind {_quote(kind)}")
         sequence = d.get("sequence")
         if _is_number(sequence) and kind == "kitti":
             sequence = f"{int(sequence):02d}"
         sequence = self.typed(sequence, "dataset.sequence", "str", optional=True)
         stereo = self.typed(d.get("stereo", False), "dataset.stereo", "bool")
         options = dict(self.typed(d.get("options") or {}, "dataset.options", "dict"))
+        frames = options.get("frames")
+        if _is_number(frames) and not 1 <= frames <= MAX_FRAMES:
+            raise self.error("dataset.options.frames", f"{_quote(frames)} is not valid; must be a whole number in 1 .. {MAX_FRAMES}")
         for key in options:
             if key not in allowed or key in ("sequence", "stereo"):
                 rest = [a for a in allowed if a not in ("sequence", "stereo")]
-                raise self.error(f"dataset.options.{key}", f"unknown option of dataset kind {kind!r}; known: {', '.join(rest) or 'none'}")
+                raise self.error(f"dataset.options.{key}", f"unknown option of dataset kind {_quote(kind)}; known: {', '.join(rest) or 'none'}")
         for key, given in (("sequence", sequence), ("stereo", stereo or None)):
             if given is not None and key not in allowed:
-                raise self.error(f"dataset.{key}", f"dataset kind {kind!r} has no {key} option; its options: {', '.join(allowed) or 'none'}")
+                raise self.error(f"dataset.{key}", f"dataset kind {_quote(kind)} has no {key} option; its options: {', '.join(allowed) or 'none'}")
         return DatasetConfig(
             type=kind,
             path=folder,
             sequence=sequence,
-            max_frames=self.typed(d.get("max_frames"), "dataset.max_frames", "int", optional=True, minimum=1),
+            max_frames=self.frame_count(d.get("max_frames"), "dataset.max_frames"),
             start=self.typed(d.get("start", 0), "dataset.start", "int", minimum=0),
             stereo=stereo,
             options=options,
@@ -332,6 +421,8 @@ class _Parser:
         if value is None or value == []:
             return (PerturbationConfig(name="baseline", type="none"),)
         self.typed(value, "perturbations", "list")
+        if len(value) > MAX_PERTURBATIONS:
+            raise self.error("perturbations", f"{len(value)} perturbations; the limit is {MAX_PERTURBATIONS} (split the experiment)")
         found: list[PerturbationConfig] = []
         seen: dict[str, int] = {}
         for i, item in enumerate(value):
@@ -339,7 +430,7 @@ class _Parser:
             d = self.mapping(item, where, _PERTURBATION, required=("name", "type"))
             name = self.safe_name(d["name"], f"{where}.name")
             if name in seen:
-                raise self.error(f"{where}.name", f"{name!r} is already the name of perturbations[{seen[name]}]; names must be unique (they are folder names)")
+                raise self.error(f"{where}.name", f"{_quote(name)} is already the name of perturbations[{seen[name]}]; names must be unique (they are folder names)")
             seen[name] = i
             kind = self.typed(d["type"], f"{where}.type", "str")
             if name == BASELINE and kind != "none":
@@ -361,7 +452,7 @@ class _Parser:
     def module(self, kind: str, params: dict[str, Any], where: str) -> Perturbation:
         names = [n for n in PERTURBATIONS.names() if n != "composite"]
         if kind not in names:
-            raise self.error(f"{where}.type", f"unknown perturbation module {kind!r}; known: none, composite, {', '.join(names)}")
+            raise self.error(f"{where}.type", f"unknown perturbation module {_quote(kind)}; known: none, composite, {', '.join(names)}")
         cls = module_class(kind)
         specs = cls.parameters()
         for key, value in params.items():
@@ -371,7 +462,7 @@ class _Parser:
             try:
                 spec.validate(value, kind)
             except ParameterError:
-                shown = f"{value!r}{' ' + spec.unit if spec.unit and _is_number(value) else ''}"
+                shown = f"{_quote(value)}{' ' + spec.unit if spec.unit and _is_number(value) else ''}"
                 raise self.error(f"{where}.parameters.{key}", f"{shown} is not valid; {key} must be {spec.allowed()}") from None
         try:
             return cls(**params)
@@ -382,7 +473,7 @@ class _Parser:
         d = self.mapping(params, where, _COMPOSITE, required=("modules",))
         mode = d.get("mode", "sequential")
         if mode != "sequential":
-            raise self.error(f"{where}.mode", f"{mode!r} is not valid; the only mode is 'sequential'")
+            raise self.error(f"{where}.mode", f"{_quote(mode)} is not valid; the only mode is 'sequential'")
         modules = self.typed(d["modules"], f"{where}.modules", "list")
         if not modules:
             raise self.error(f"{where}.modules", "must list at least one module")
@@ -392,7 +483,7 @@ class _Parser:
             s = self.mapping(item, at, _STEP, required=("type",))
             kind = self.typed(s["type"], f"{at}.type", "str")
             if kind in ("none", "composite"):
-                raise self.error(f"{at}.type", f"{kind!r} cannot be a step of a composite; use a perturbation module")
+                raise self.error(f"{at}.type", f"{_quote(kind)} cannot be a step of a composite; use a perturbation module")
             step_params = self.typed(s.get("parameters") or {}, f"{at}.parameters", "dict")
             self.module(kind, step_params, at)
             name = self.typed(s.get("name"), f"{at}.name", "str", optional=True)
@@ -415,10 +506,10 @@ class _Parser:
         target = self.typed(d["target_perturbation"], f"{w}.target_perturbation", "str")
         by_name = {p.name: p for p in perturbations}
         if target not in by_name:
-            raise self.error(f"{w}.target_perturbation", f"{target!r} is not a perturbation of this config; perturbations: {', '.join(by_name)}")
+            raise self.error(f"{w}.target_perturbation", f"{_quote(target)} is not a perturbation of this config; perturbations: {', '.join(by_name)}")
         pert = by_name[target]
         if pert.type == "none":
-            raise self.error(f"{w}.target_perturbation", f"{target!r} is the clean sequence (type none); it has no parameter to search")
+            raise self.error(f"{w}.target_perturbation", f"{_quote(target)} is the clean sequence (type none); it has no parameter to search")
         parameter = self.typed(d["parameter"], f"{w}.parameter", "str")
         module = build_module(pert)
         assert module is not None
@@ -427,17 +518,17 @@ class _Parser:
                 position, spec = module.param(parameter)
             except ParameterError:
                 addresses = [a for a, (_, p) in module.addresses().items() if p.searchable and "@" not in a and "." in a]
-                raise self.error(f"{w}.parameter", f"composite {target!r} has no parameter {parameter!r}; searchable: {', '.join(addresses) or 'none'}") from None
+                raise self.error(f"{w}.parameter", f"composite {_quote(target)} has no parameter {_quote(parameter)}; searchable: {', '.join(addresses) or 'none'}") from None
             owner = module.steps[position].name
         else:
             spec = type(module).parameters().get(parameter)  # type: ignore[assignment]
             owner = module.name
         searchable = [a for a, (_, p) in module.addresses().items() if p.searchable and "@" not in a and "." in a] if isinstance(module, Composite) else list(type(module).searchable())
         if spec is None or not spec.searchable:
-            raise self.error(f"{w}.parameter", f"{parameter!r} is not a searchable parameter of {target!r} ({module.name}); searchable: {', '.join(searchable) or 'none'}")
+            raise self.error(f"{w}.parameter", f"{_quote(parameter)} is not a searchable parameter of {_quote(target)} ({module.name}); searchable: {', '.join(searchable) or 'none'}")
         declared = self.typed(d.get("module", ""), f"{w}.module", "str")
         if declared and declared != owner:
-            raise self.error(f"{w}.module", f"{declared!r} does not match the module of {parameter!r} in {target!r}, which is {owner!r}")
+            raise self.error(f"{w}.module", f"{_quote(declared)} does not match the module of {_quote(parameter)} in {_quote(target)}, which is {owner!r}")
         scale = spec.search_space()
         unit = f" {scale.unit}" if scale.unit else ""
         allowed = f"{'an integer' if scale.domain == 'integer' else 'a number'} in {scale.min:g} .. {scale.max:g}{unit}"
@@ -446,7 +537,7 @@ class _Parser:
             v = d[key]
             ok = _is_number(v) and scale.min <= v <= scale.max and (scale.domain != "integer" or float(v).is_integer())
             if not ok:
-                raise self.error(f"{w}.{key}", f"{v!r}{unit if _is_number(v) else ''} is not valid; {parameter} search values must be {allowed}")
+                raise self.error(f"{w}.{key}", f"{_quote(v)}{unit if _is_number(v) else ''} is not valid; {parameter} search values must be {allowed}")
             bounds[key] = int(v) if scale.domain == "integer" else float(v)
         if not bounds["lower_bound"] < bounds["upper_bound"]:
             raise self.error(f"{w}.upper_bound", f"{bounds['upper_bound']:g} must be greater than lower_bound {bounds['lower_bound']:g}")

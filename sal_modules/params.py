@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import numbers
+import reprlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal
@@ -220,7 +221,9 @@ class Param:
         converted = checker(value)
         if converted is _INVALID:
             where = f"{module}: " if module else ""
-            shown = f"{value!r}{' ' + self.unit if self.unit and _is_number(value) else ''}"
+            quoted = reprlib.repr(value) if isinstance(value, (list, tuple, dict, set)) else repr(value)
+            quoted = quoted if len(quoted) <= 80 else quoted[:77] + "..."
+            shown = f"{quoted}{' ' + self.unit if self.unit and _is_number(value) else ''}"
             doc = f" ({self.doc})" if self.doc else ""
             raise ParameterError(f"{where}{self.name} = {shown} is not valid; {self.name}{doc} must be {self.allowed()}")
         return converted

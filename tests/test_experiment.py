@@ -300,3 +300,25 @@ def test_refuses_to_replace_a_folder_it_did_not_write(tmp_path: Path, capsys: py
     assert main(["perturb", str(write(tmp_path, config)), "--cache-dir", str(tmp_path / "cache")]) == 2
     assert "output.base_dir: " in capsys.readouterr().err and precious.read_text() == "keep me"
     assert not (tmp_path / "out" / "exp" / "images" / "soil").exists() and not (tmp_path / "cache").exists()
+
+
+def test_hostile_configs_end_in_one_short_line_quickly(tmp_path: Path) -> None:
+    import time
+
+    # "billion laughs": nine levels of nine aliases (10^9 strings once expanded), before the config
+    laughs = 'a: &a ["lol","lol","lol","lol","lol","lol","lol","lol","lol"]\n'
+    laughs += "".join(f"{chr(98 + i)}: &{chr(98 + i)} [{','.join(['*' + chr(97 + i)] * 9)}]\n" for i in range(8))
+    valid = yaml.safe_dump(base_config(tmp_path), sort_keys=False)
+    cases = {
+        laughs + valid: "holds more than 100000 values once its YAML aliases are expanded",
+        "experiment: " + "[" * 1000 + "]" * 1000 + "\n": "nested deeper than 32 levels",
+        yaml.safe_dump(base_config(tmp_path, dataset={"type": "synthetic", "options": {"frames": 2**63}})): "dataset.options.frames: 9223372036854775808 is not valid; must be a whole number in 1 .. 1000000",
+        yaml.safe_dump(base_config(tmp_path, dataset={"type": "synthetic", "max_frames": 10**9})): "dataset.max_frames: 1000000000 is not valid; the limit is 1000000 frames",
+        yaml.safe_dump(base_config(tmp_path, perturbations=[{"name": f"p{i}", "type": "fog"} for i in range(300)])): "perturbations: 300 perturbations; the limit is 256",
+        yaml.safe_dump(base_config(tmp_path, experiment={"name": "x" * 100_000})): "experiment.name: 'xxxxxxxx",
+    }
+    for text, message in cases.items():
+        start = time.perf_counter()
+        error = error_of(tmp_path, text)
+        assert time.perf_counter() - start < 1.0, message
+        assert message in error and "\n" not in error and len(error) < 400, error
