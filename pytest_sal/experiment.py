@@ -542,10 +542,10 @@ class _Parser:
         if not bounds["lower_bound"] < bounds["upper_bound"]:
             raise self.error(f"{w}.upper_bound", f"{bounds['upper_bound']:g} must be greater than lower_bound {bounds['lower_bound']:g}")
         tolerance = self.typed(d.get("tolerance", 0.05), f"{w}.tolerance", "number")
-        if tolerance <= 0:
+        if not 0 < tolerance < float("inf"):  # NaN and inf are refused here, naming this key
             raise self.error(f"{w}.tolerance", f"{tolerance:g} is not valid; must be a number > 0{unit}")
         fail = self.typed(d.get("ate_rmse_fail", 1.5), f"{w}.ate_rmse_fail", "number")
-        if fail <= 0:
+        if not 0 < fail < float("inf"):
             raise self.error(f"{w}.ate_rmse_fail", f"{fail:g} m is not valid; must be a number > 0 m")
         name = d.get("name") or f"{target}_{parameter.replace('.', '_')}"
         return BoundaryConfig(

@@ -316,6 +316,7 @@ def test_hostile_configs_end_in_one_short_line_quickly(tmp_path: Path) -> None:
         yaml.safe_dump(base_config(tmp_path, dataset={"type": "synthetic", "max_frames": 10**9})): "dataset.max_frames: 1000000000 is not valid; the limit is 1000000 frames",
         yaml.safe_dump(base_config(tmp_path, perturbations=[{"name": f"p{i}", "type": "fog"} for i in range(300)])): "perturbations: 300 perturbations; the limit is 256",
         yaml.safe_dump(base_config(tmp_path, experiment={"name": "x" * 100_000})): "experiment.name: 'xxxxxxxx",
+        valid.replace("tolerance: 5", "tolerance: .nan"): "robustness_boundary.tolerance: nan is not valid; must be a number > 0",
     }
     for text, message in cases.items():
         start = time.perf_counter()
