@@ -122,14 +122,6 @@ class Criterion:
         value = metrics.get(self.metric.name)
         return value is not None and math.isfinite(float(value)) and _OPS[self.op](float(value), self.threshold)
 
-    def near(self, metrics: Mapping[str, Any], noise: float) -> bool:
-        """The metric lies within ``noise`` (relative) of the threshold."""
-        value = metrics.get(self.metric.name)
-        if value is None or not math.isfinite(float(value)):
-            return False
-        scale = max(abs(self.threshold), 1e-12)
-        return abs(float(value) - self.threshold) <= noise * scale
-
     def __bool__(self) -> bool:
         raise InvalidRequirement(f"{self} is a criterion for sal.require(...), not a truth value; use criterion.holds(metrics)")
 

@@ -66,24 +66,11 @@ def search_outcome(
         trial = runner.evaluate(value)
         return trial.passed, trial
 
-    result = boundary_search(evaluate, space, edge, tolerance, max_trials, warm_start, judge=_Judge(runner), rel_tolerance=rel_tolerance)
+    result = boundary_search(evaluate, space, edge, tolerance, max_trials, warm_start, judge=runner, rel_tolerance=rel_tolerance)
     verdict = "flaky" if result.flaky else "passed" if result.edge_passed else "failed"
     boundary = Boundary(result.pass_value, result.fail_value, ref.unit)
     trials = [point.info for point in result.trials]
     return _outcome(runner, requirement, test_id, verdict, boundary, result.termination, trials, result.contradictions)
-
-
-@dataclass(frozen=True)
-class _Judge:
-    """The ``search.Judge`` of a runner's trials (noisy systems only; see ``VotePolicy``)."""
-
-    runner: TrialRunner
-
-    def confirm(self, info: Trial) -> bool:
-        return self.runner.confirm(info)
-
-    def settled(self, info: Trial) -> bool:
-        return self.runner.settled(info)
 
 
 def single_outcome(runner: TrialRunner, requirement: Requirement, test_id: str, value: float) -> Outcome:

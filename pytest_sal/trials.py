@@ -174,7 +174,7 @@ class TrialRunner:
         self._extend(trial, confirming=False)
         return trial
 
-    # -- the Judge of pytest_sal.search ----------------------------------------------------------
+    # -- the Judge of pytest_sal.search (its trials' info is the Trial) ------------------------------
     def confirm(self, trial: Trial) -> bool:
         """More runs of ``trial`` until its verdict leads by ``confirm_lead``; its verdict."""
         if self.policy.noisy:
