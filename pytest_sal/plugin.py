@@ -65,7 +65,7 @@ def pytest_report_header(config: pytest.Config) -> list[str]:
     they need (more xdist workers than cores, or a machine already busy): such runs fall
     behind the sensor clock; they are re-paced and marked, and take longer."""
     session: SalSession = config.stash[SAL_SESSION]
-    if not session.runs_orbslam3():
+    if session.default_system_name() != "orbslam3":
         return []
     from sal_wrappers import oversubscribed_warning
 

@@ -217,22 +217,18 @@ class SalSession:
             self._datasets[scene] = open_dataset("synthetic", scene=scene, frames=DEFAULT_FRAMES[scene], sensor=sensor)
         return self._datasets[scene]
 
-    def runs_orbslam3(self) -> bool:
-        """The default system is ORB-SLAM3 (named in ini, or installed)."""
+    def default_system_name(self) -> str:
+        """ini ``sal_system``, else ``orbslam3`` when ``pyorbslam3`` is installed, else ``reference_vo``."""
         if self.system_name:
-            return bool(self.system_name == "orbslam3")
+            return str(self.system_name)
         import importlib.util
 
-        return importlib.util.find_spec("pyorbslam3") is not None
+        return "orbslam3" if importlib.util.find_spec("pyorbslam3") else "reference_vo"
 
     def default_system(self) -> Any:
         from sal_wrappers import create
 
-        if self.system_name:
-            return create(self.system_name)
-        import importlib.util
-
-        return create("orbslam3" if importlib.util.find_spec("pyorbslam3") else "reference_vo")
+        return create(self.default_system_name())
 
     # -- running -------------------------------------------------------------------------------
     def _runner(self, item: pytest.Item, ref: Any, dataset: Any, system: Any, runs: int | None, workdir: Path) -> Any:
