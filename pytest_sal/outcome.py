@@ -57,11 +57,20 @@ class Trial:
         """Runs that failed only after falling behind the sensor clock: no vote."""
         return sum(bool(r.get("abstained")) for r in self.runs)
 
+    @property
+    def agreeing(self) -> int:
+        """Runs whose vote agrees with the trial's verdict."""
+        return self.passes if self.passed else self.fails
+
+    @property
+    def voting(self) -> int:
+        """Runs that voted (all but the starved ones)."""
+        return self.passes + self.fails
+
     def votes(self) -> str:
         """``3 of 3 runs passed``, ``2 of 3 runs failed``: the runs behind the verdict."""
-        agreeing = self.passes if self.passed else self.fails
-        voting = self.passes + self.fails
-        text = f"{agreeing} of {voting} run{'s' if voting != 1 else ''} {'passed' if self.passed else 'failed'}"
+        voting = self.voting
+        text = f"{self.agreeing} of {voting} run{'s' if voting != 1 else ''} {'passed' if self.passed else 'failed'}"
         return text + (f" ({self.abstained} starved by the machine, not counted)" if self.abstained else "")
 
 

@@ -179,7 +179,7 @@ def confidence_cell(outcome: Outcome) -> str:
         return "1 run/trial"
 
     def share(t: Trial) -> str:
-        return f"{t.passes if t.passed else t.fails}/{len(t.runs)}"
+        return f"{t.agreeing}/{t.voting}"
 
     ends = [share(t) for t in outcome.end_trials() if t is not None and t is not outcome.trials[0]]
     return share(outcome.trials[0]) + (f"; {' '.join(ends)}" if ends else "")
