@@ -13,12 +13,29 @@ Layout under the cache root (default ``.sal/cache`` under the pytest rootdir)::
     .gitignore                 "*", written when the folder is first created
     locks/<key>.lock           flock(2) lock of a key, present only while someone holds it
     ab/abcdef....json          a result entry (shard = first two hex digits of the key)
-    ab/abcdef.../              a folder entry
+    ab/abcdef.../manifest.json a folder entry: the size and SHA-256 of every file in data/,
+    ab/abcdef.../data/         and the files (the folder ``compute_dir`` returns)
     ab/.tmp-<key>-...          a write in progress (or left by a killed process; removed later)
 
 Every entry appears by one ``os.replace``/``rename`` of a finished temporary sibling, so readers
 see a whole entry or none. Reads set the entry's modification time, and :meth:`ContentCache.evict`
 removes the least recently used entries first.
+
+Entries check themselves. A result entry is ``{"sha256": ..., "data": {...}}``, the checksum
+being that of the canonical JSON of ``data`` (keys sorted, compact); a folder entry's manifest,
+written last, is such an entry too. Every read checks the checksum and the reader's own
+``check`` of the data's shape; every use of a folder entry compares the files' names and sizes
+with the manifest, and its first use by a :class:`ContentCache` object (once a session) also
+their SHA-256. An entry that is not UTF-8, not JSON, has no checksum, does not match it, fails
+``check`` or has a damaged file is never served: it is removed under its key's lock and
+computed again, with one :class:`CacheWarning` naming it and what was wrong. Entries written
+before checksums existed are such entries (trial runs changed keys instead, see
+``pytest_sal.trials.RUNNER_VERSION``). A ``compute`` whose ``transient`` hook gives a reason is
+returned and not stored (a run the machine decided).
+
+A read-only cache (a read-only mount, or a folder this user cannot write) is used as it is:
+its entries are served, and what it lacks is computed and not stored, with one
+:class:`CacheWarning` per :class:`ContentCache` object saying so.
 
 >>> from pytest_sal.cache_keys import cache_key
 >>> key = cache_key(dataset="3f2a...", module={"name": "fog", "version": 1, "params": {"visibility_m": 30.0}},
@@ -29,11 +46,15 @@ removes the least recently used entries first.
 
 from __future__ import annotations
 
+import atexit
+import errno
+import hashlib
 import json
 import os
 import re
 import secrets
 import shutil
+import tempfile
 import time
 import warnings
 from collections.abc import Callable, Iterator, Mapping
@@ -48,6 +69,7 @@ __all__ = [
     "CacheError",
     "CacheWarning",
     "ContentCache",
+    "EntryCheck",
     "command_cache",
     "default_cache_dir",
     "parse_size",
@@ -60,10 +82,17 @@ _KEY = re.compile(r"[0-9a-f]{16,128}")
 _TEMP = re.compile(r"\.tmp-(?P<key>[0-9a-f]{16,128})-")
 _SHARD = re.compile(r"[0-9a-f]{2}")
 _GITIGNORE = "# Created by pytest-sal: the trial cache; safe to delete (sal cache clear).\n*\n"
+_MANIFEST = "manifest.json"
+_FILES = "data"
+#: errno values of a write refused because the cache is read-only (mount or permissions).
+_READ_ONLY = frozenset({errno.EACCES, errno.EPERM, errno.EROFS})
+
+#: What is wrong with a stored dict, in words, or ``None`` (``ContentCache.compute``'s ``check``).
+EntryCheck = Callable[[dict[str, Any]], str | None]
 
 
 class CacheWarning(UserWarning):
-    """An unreadable cache entry was ignored (it is recomputed and overwritten)."""
+    """A bad cache entry was discarded (it is computed again), or the cache is read-only."""
 
 
 # --------------------------------------------------------------------------------------- keys
@@ -137,6 +166,10 @@ class ContentCache:
         root: the cache folder (created, with a ``.gitignore`` of ``*``, on the first write).
         max_bytes: when set, :meth:`evict` runs after every store and keeps the total size
             of the entries at or under it by removing the least recently used ones.
+
+    Attributes:
+        read_only: why entries cannot be stored (``"Read-only file system"``), found at the
+            first store; ``None`` while the cache is writable.
     """
 
     def __init__(self, root: str | os.PathLike[str], max_bytes: int | None = None):
@@ -144,8 +177,10 @@ class ContentCache:
             raise ValueError(f"max_bytes must be None or an int >= 0, got {max_bytes!r}")
         self.root = Path(os.path.abspath(Path(root).expanduser()))
         self.max_bytes = max_bytes
+        self.read_only: str | None = None
         self._ready = False
         self._last_ns = 0
+        self._hashed: set[str] = set()  # folder entries whose file hashes this object checked
 
     def __repr__(self) -> str:
         return f"ContentCache({str(self.root)!r}, max_bytes={self.max_bytes!r})"
@@ -153,63 +188,68 @@ class ContentCache:
     # ---- paths
 
     def path(self, key: str, folder: bool = False) -> Path:
-        """Where the entry of ``key`` lives (a ``.json`` file, or a folder when ``folder``)."""
+        """Where the entry of ``key`` lives: a ``.json`` file, or when ``folder`` the folder of
+        files that :meth:`compute_dir` returns (``data/`` in the entry, beside its manifest)."""
         _check_key(key)
-        return self.root / key[:2] / (key if folder else key + ".json")
+        return self.root / key[:2] / (key + "/" + _FILES if folder else key + ".json")
 
     # ---- result entries
 
-    def get(self, key: str) -> dict[str, Any] | None:
-        """The stored dict of ``key`` (and mark it used), or None when there is none."""
+    def get(self, key: str, check: EntryCheck | None = None) -> dict[str, Any] | None:
+        """The stored dict of ``key`` (and mark it used), or None when there is none or it is
+        bad (then it is removed, with a :class:`CacheWarning`); ``check`` as in :meth:`compute`."""
         path = self.path(key)
-        try:
-            text = path.read_text(encoding="utf-8")
-        except FileNotFoundError:
-            return None
-        except NotADirectoryError:
-            raise CacheError("not a folder; choose another cache folder", self.root) from None
-        except OSError as exc:
-            raise CacheError(f"cannot read cache entry: {exc.strerror}", path) from None
-        try:
-            data = json.loads(text)
-        except ValueError as exc:
-            data, problem = None, f"not JSON ({exc})"
-        else:
-            problem = None if isinstance(data, dict) else f"holds a {type(data).__name__}, not a dict"
-        if problem is not None:
-            warnings.warn(CacheWarning(f"{path}: ignoring cache entry: {problem}"), stacklevel=2)
-            return None
-        self._touch(path)
+        data, problem = self._read(key, check)
+        if problem is None or not self._ensure_root():
+            self._discard(key, path, problem)
+            return data
+        with self.lock(key):
+            data, problem = self._read(key, check)
+            self._discard(key, path, problem)
         return data
 
     def put(self, key: str, data: Mapping[str, Any]) -> None:
-        """Store ``data`` (a JSON-ready dict; tuples come back as lists) under ``key``, atomically."""
-        text = self._encode(key, data)
-        self._ensure_root()
+        """Store ``data`` (a JSON-ready dict; tuples come back as lists) under ``key``, atomically
+        (nothing happens in a read-only cache)."""
+        raw, _ = self._encode(key, data)
+        if not self._ensure_root():
+            return
         with self.lock(key):
-            self._write(key, text)
+            self._write(key, raw)
             self._evict_if_bounded()
 
-    def compute(self, key: str, fn: Callable[[], Mapping[str, Any]]) -> tuple[dict[str, Any], bool]:
+    def compute(
+        self, key: str, fn: Callable[[], Mapping[str, Any]], *, check: EntryCheck | None = None, transient: EntryCheck | None = None
+    ) -> tuple[dict[str, Any], bool]:
         """``(data, was_cached)``: the stored dict of ``key``, or ``fn()`` stored under it.
 
         Only one process computes a key at a time: the others block on the key's lock and then
         read what it stored. When ``fn`` raises, nothing is stored, the exception propagates
         and the next waiting process computes itself. The returned dict is the stored JSON read
         back, so a computing and a waiting process get equal data.
+
+        Args:
+            check: what is wrong with a stored dict in words (``None``: nothing), for the
+                fields its reader needs; a stored dict it faults is discarded and recomputed.
+            transient: why a computed dict must not be stored (``None``: store it), e.g. a run
+                the machine decided; it is returned all the same.
         """
-        data = self.get(key)
+        data, problem = self._read(key, check)
         if data is not None:
             return data, True
-        self._ensure_root()
+        if not self._ensure_root():
+            self._discard(key, self.path(key), problem)
+            return self._encode(key, fn())[1], False
         with self.lock(key):
-            data = self.get(key)
+            data, problem = self._read(key, check)
             if data is not None:
                 return data, True
-            text = self._encode(key, fn())
-            self._write(key, text)
-            self._evict_if_bounded()
-        return json.loads(text), False
+            self._discard(key, self.path(key), problem)
+            raw, data = self._encode(key, fn())
+            if transient is None or transient(data) is None:
+                self._write(key, raw)
+                self._evict_if_bounded()
+        return data, False
 
     # ---- folder entries
 
@@ -217,32 +257,43 @@ class ContentCache:
         """``(folder, was_cached)``: the stored folder of ``key``, or one that ``fn`` filled.
 
         ``fn`` gets an empty folder inside a temporary sibling of the entry (give it to
-        ``write_sequence(sequence, folder)``); when it returns, the folder is renamed into place
-        in one step, so a process killed midway leaves no entry (its temporary folder is removed
-        by a later ``compute_dir`` of the key, :meth:`evict` or :meth:`clear`). Locking and
+        ``write_sequence(sequence, folder)``); when it returns, the manifest of its files is
+        written beside it and the entry is renamed into place in one step, so a process killed
+        midway leaves no entry (its temporary folder is removed by a later ``compute_dir`` of
+        the key, :meth:`evict` or :meth:`clear`). A stored folder whose files do not match
+        its manifest is discarded and filled again. In a read-only cache a missing folder is
+        filled in a temporary folder outside it, removed when the process exits. Locking and
         exceptions are as in :meth:`compute`.
         """
-        final = self.path(key, folder=True)
-        if self._use_dir(final):
-            return final, True
-        self._ensure_root()
+        files = self.path(key, folder=True)
+        entry = files.parent
+        found, problem = self._verify_dir(key)
+        if found:
+            return files, True
+        if not self._ensure_root():
+            self._discard(key, entry, problem)
+            return _fill_outside(fn), False
         with self.lock(key):
-            if self._use_dir(final):
-                return final, True
+            found, problem = self._verify_dir(key)
+            if found:
+                return files, True
+            self._discard(key, entry, problem)
             self._remove_stale_temps(key[:2], only_key=key, holding=True)
             staging = self._temp_path(key)
             work = staging / "entry"
             try:
-                work.mkdir(parents=True)
-                fn(work)
-                if not work.is_dir():
-                    raise CacheError(f"compute_dir: the function removed its output folder {work}", final)
-                os.rename(work, final)
-                self._touch(final)
+                (work / _FILES).mkdir(parents=True)
+                fn(work / _FILES)
+                if not (work / _FILES).is_dir():
+                    raise CacheError(f"compute_dir: the function removed its output folder {work / _FILES}", files)
+                (work / _MANIFEST).write_bytes(_pack({"files": _listing(work / _FILES, hashes=True)}))  # last
+                os.rename(work, entry)
+                self._hashed.add(key)
+                self._touch(entry)
             finally:
                 shutil.rmtree(staging, ignore_errors=True)
             self._evict_if_bounded()
-        return final, False
+        return files, False
 
     # ---- locking
 
@@ -310,43 +361,112 @@ class ContentCache:
 
     # ---- internals
 
-    def _ensure_root(self) -> None:
-        if self._ready:
-            return
+    def _ensure_root(self) -> bool:
+        """Create the cache folder once and try a write in it; False when it is read-only
+        (warned once)."""
+        if self._ready or self.read_only is not None:
+            return self._ready
         root = self.root
         try:
             fresh = not root.exists() or (root.is_dir() and not any(root.iterdir()))
             root.mkdir(parents=True, exist_ok=True)
             (root / "locks").mkdir(exist_ok=True)
+            probe = root / "locks" / f".probe-{os.getpid()}-{secrets.token_hex(4)}"
+            os.close(os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644))
+            os.unlink(probe)
         except (FileExistsError, NotADirectoryError):
             raise CacheError("not a folder; choose another cache folder", root) from None
         except OSError as exc:
-            raise CacheError(f"cannot create the cache folder: {exc.strerror}", root) from None
+            if exc.errno not in _READ_ONLY:
+                raise CacheError(f"cannot create the cache folder: {exc.strerror}", root) from None
+            self.read_only = exc.strerror or errno.errorcode.get(exc.errno or 0, str(exc))
+            warnings.warn(CacheWarning(
+                f"the cache at {root} is read-only ({self.read_only}): the entries it holds are used, new results are computed and not stored"
+            ), stacklevel=4)
+            return False
         gitignore = root / ".gitignore"
         if fresh and not gitignore.exists():
             temp = root / f".gitignore.{secrets.token_hex(4)}.tmp"
             temp.write_text(_GITIGNORE, encoding="utf-8")
             os.replace(temp, gitignore)
         self._ready = True
+        return True
 
-    def _encode(self, key: str, data: Any) -> str:
+    def _encode(self, key: str, data: Any) -> tuple[bytes, dict[str, Any]]:
+        """The entry's bytes for ``data`` and ``data`` as it reads back (tuples become lists)."""
         path = self.path(key)
         if not isinstance(data, Mapping):
             raise CacheError(f"cache entry {key[:12]}...: expected a dict, got a {type(data).__name__}", path)
         try:
-            return json.dumps(dict(data), ensure_ascii=False)
+            raw = _pack(data)
         except (TypeError, ValueError) as exc:
             raise CacheError(f"cache entry {key[:12]}... is not JSON-ready: {exc}", path) from None
+        return raw, json.loads(raw)["data"]
 
-    def _write(self, key: str, text: str) -> None:
+    def _read(self, key: str, check: EntryCheck | None) -> tuple[dict[str, Any] | None, str | None]:
+        """``(data, None)`` of a good entry (marked used), ``(None, None)`` when there is none,
+        ``(None, what is wrong)`` for a bad one."""
+        path = self.path(key)
+        try:
+            raw = path.read_bytes()
+        except FileNotFoundError:
+            return None, None
+        except NotADirectoryError:
+            raise CacheError("not a folder; choose another cache folder", self.root) from None
+        except OSError as exc:
+            return None, f"cannot read it ({exc.strerror})"
+        data, problem = _unpack(raw)
+        if data is not None and check is not None:
+            problem = check(data)
+        if problem is not None:
+            return None, problem
+        self._touch(path)
+        return data, None
+
+    def _discard(self, key: str, path: Path, problem: str | None) -> None:
+        """Warn that the entry of ``key`` at ``path`` is bad (when ``problem``) and remove it: the
+        caller holds the key's lock, or the cache is read-only and the entry stays."""
+        if problem is None:
+            return
+        done = "ignored (the cache is read-only)" if self.read_only else "removed"
+        warnings.warn(CacheWarning(f"{path}: bad cache entry, {done} and computed again: {problem}"), stacklevel=4)
+        self._hashed.discard(key)
+        if self.read_only is None:
+            self._bury(key, path)
+
+    def _verify_dir(self, key: str) -> tuple[bool, str | None]:
+        """``(True, None)`` when the folder entry of ``key`` matches its manifest (names and sizes,
+        and on this object's first use of it the SHA-256 of each file; marked used),
+        ``(False, None)`` when there is none, ``(False, what is wrong)`` for a bad one."""
+        files = self.path(key, folder=True)
+        entry = files.parent
+        if not entry.is_dir():
+            return False, None
+        try:
+            raw = (entry / _MANIFEST).read_bytes()
+        except FileNotFoundError:
+            return False, f"no {_MANIFEST} (written before pytest-sal checked its entries, or a damaged entry)"
+        except OSError as exc:
+            return False, f"cannot read {_MANIFEST} ({exc.strerror})"
+        manifest, problem = _unpack(raw)
+        if manifest is None:
+            return False, f"{_MANIFEST}: {problem}"
+        problem = _mismatch(manifest.get("files"), _listing(files, hashes=key not in self._hashed))
+        if problem is not None:
+            return False, problem
+        self._hashed.add(key)
+        self._touch(entry)
+        return True, None
+
+    def _write(self, key: str, raw: bytes) -> None:
         """Write the entry through a temporary sibling and ``os.replace`` (caller holds the lock)."""
         path = self.path(key)
         temp = self._temp_path(key, ".json")
         try:
             path.parent.mkdir(exist_ok=True)
             self._remove_stale_temps(key[:2], only_key=key, holding=True)  # a killed writer's
-            with open(temp, "x", encoding="utf-8") as handle:
-                handle.write(text)
+            with open(temp, "xb") as handle:
+                handle.write(raw)
                 handle.flush()
                 os.fsync(handle.fileno())
             self._stamp(temp)
@@ -379,12 +499,6 @@ class ContentCache:
         except OSError:  # evicted meanwhile, or a read-only cache: the data is still good
             pass
 
-    def _use_dir(self, path: Path) -> bool:
-        if not path.is_dir():
-            return False
-        self._touch(path)
-        return True
-
     def _shards(self) -> Iterator[Path]:
         try:
             children = list(os.scandir(self.root))
@@ -416,21 +530,25 @@ class ContentCache:
         if not lock.acquire(blocking=False):
             return False
         try:
-            if entry.is_dir:
-                grave = self._temp_path(entry.key)
-                try:
-                    os.rename(entry.path, grave)
-                except FileNotFoundError:
-                    return False
-                shutil.rmtree(grave, ignore_errors=True)
-            else:
-                try:
-                    entry.path.unlink()
-                except FileNotFoundError:
-                    return False
-            return True
+            return self._bury(entry.key, entry.path)
         finally:
             lock.release()
+
+    def _bury(self, key: str, path: Path) -> bool:
+        """Remove the entry of ``key`` at ``path`` (the caller holds the key's lock); a folder is
+        renamed away first, so no reader sees half of one. False when it was gone already."""
+        try:
+            if path.is_dir() and not path.is_symlink():
+                grave = self._temp_path(key)
+                os.rename(path, grave)
+                shutil.rmtree(grave, ignore_errors=True)
+            else:
+                path.unlink()
+        except FileNotFoundError:
+            return False
+        except OSError as exc:
+            raise CacheError(f"cannot remove cache entry: {exc.strerror}", path) from None
+        return True
 
     def _remove_stale_temps(self, shard_name: str | None = None, only_key: str | None = None, holding: bool = False) -> None:
         """Remove temporary files and folders whose key nobody holds locked (killed writers)."""
@@ -449,6 +567,83 @@ class ContentCache:
                         _remove_path(Path(child.path))
                     finally:
                         lock.release()
+
+
+def _canonical(data: Mapping[str, Any]) -> str:
+    """The JSON text an entry's checksum covers: keys sorted, compact, UTF-8 kept."""
+    return json.dumps(dict(data), sort_keys=True, separators=(",", ":"), ensure_ascii=False)
+
+
+def _sha256(text: str) -> str:
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def _pack(data: Mapping[str, Any]) -> bytes:
+    """The bytes of an entry holding ``data``: ``{"sha256": <of the canonical JSON>, "data": ...}``."""
+    payload = _canonical(data)
+    return f'{{"sha256":"{_sha256(payload)}","data":{payload}}}\n'.encode("utf-8")
+
+
+def _unpack(raw: bytes) -> tuple[dict[str, Any] | None, str | None]:
+    """``(data, None)`` of an entry's bytes, or ``(None, what is wrong)`` in a few words."""
+    try:
+        entry = json.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        return None, f"not UTF-8 (byte 0x{raw[exc.start]:02x} at offset {exc.start})"
+    except ValueError as exc:
+        return None, f"not JSON ({exc})" if raw.strip() else "empty"
+    if not isinstance(entry, dict) or set(entry) != {"sha256", "data"}:
+        shape = f"keys {', '.join(sorted(entry)[:5]) or '(none)'}" if isinstance(entry, dict) else f"a JSON {type(entry).__name__}"
+        return None, f"no checksum: {shape}, not sha256 and data (written by hand, or before pytest-sal checked its entries)"
+    if not isinstance(entry["data"], dict):
+        return None, f"its data is a JSON {type(entry['data']).__name__}, not an object"
+    if _sha256(_canonical(entry["data"])) != entry["sha256"]:
+        return None, "checksum mismatch: changed after it was written"
+    return entry["data"], None
+
+
+def _listing(folder: Path, hashes: bool) -> dict[str, list[Any]]:
+    """``{relative path: [size, SHA-256 or None]}`` of every file under ``folder``."""
+    out: dict[str, list[Any]] = {}
+    for base, _dirs, names in os.walk(folder):
+        for name in names:
+            path = os.path.join(base, name)
+            try:
+                out[os.path.relpath(path, folder)] = [os.stat(path).st_size, _file_sha256(path) if hashes else None]
+            except FileNotFoundError:  # a dangling link
+                out[os.path.relpath(path, folder)] = [None, None]
+    return out
+
+
+def _file_sha256(path: str) -> str:
+    with open(path, "rb") as handle:
+        return hashlib.file_digest(handle, "sha256").hexdigest()
+
+
+def _mismatch(listed: Any, found: dict[str, list[Any]]) -> str | None:
+    """How the files ``found`` (``_listing``) differ from a manifest's ``listed`` files."""
+    if not isinstance(listed, dict) or not all(isinstance(v, list) and len(v) == 2 for v in listed.values()):
+        return f"{_MANIFEST} lists no files"
+    for name in sorted(set(listed) | set(found)):
+        if name not in found:
+            return f"{_FILES}/{name} is missing"
+        if name not in listed:
+            return f"{_FILES}/{name} is not in {_MANIFEST}"
+        (size, digest), (real_size, real_digest) = listed[name], found[name]
+        if real_size != size:
+            return f"{_FILES}/{name} has {real_size} bytes, {_MANIFEST} says {size}"
+        if real_digest is not None and real_digest != digest:
+            return f"{_FILES}/{name}: content differs from its SHA-256 in {_MANIFEST}"
+    return None
+
+
+def _fill_outside(fn: Callable[[Path], None]) -> Path:
+    """A temporary folder outside the cache filled by ``fn`` (a read-only cache's miss),
+    removed when the process exits."""
+    folder = Path(tempfile.mkdtemp(prefix="sal-uncached-"))
+    atexit.register(shutil.rmtree, folder, ignore_errors=True)
+    fn(folder)
+    return folder
 
 
 def _scandir(folder: Path) -> list[os.DirEntry[str]]:

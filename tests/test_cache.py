@@ -193,7 +193,7 @@ def test_corrupt_entry_is_a_miss_and_is_recomputed(tmp_path: Path) -> None:
     key = _key(1)
     cache.put(key, {"a": 1})
     cache.path(key).write_text('{"a": ')
-    with pytest.warns(CacheWarning, match="ignoring cache entry"):
+    with pytest.warns(CacheWarning, match="bad cache entry, removed and computed again: not JSON"):
         data, cached = cache.compute(key, lambda: {"a": 2})
     assert (data, cached) == ({"a": 2}, False) and cache.get(key) == {"a": 2}
 
@@ -254,7 +254,8 @@ def test_compute_dir_with_write_sequence(tmp_path: Path) -> None:
     assert len(back) == 3 and np.array_equal(back[2].image, sequence[2].image)
     again, cached = cache.compute_dir(key, fill)
     assert again == folder and cached and len(calls) == 1
-    assert [p.name for p in folder.parent.iterdir()] == [key]  # nothing but the entry
+    assert [p.name for p in folder.parent.parent.iterdir()] == [key]  # nothing but the entry
+    assert sorted(p.name for p in folder.parent.iterdir()) == ["data", "manifest.json"]
     stats = cache.stats()
     assert stats["folders"] == 1 and stats["bytes"] > 0
 
@@ -430,7 +431,7 @@ def test_folder_entries_are_evicted_by_size(tmp_path: Path) -> None:
     cache.put(_key(2), {"small": 1})
     second, _ = cache.compute_dir(_key(3), lambda d: (d / "img.png").write_bytes(b"3" * 3000))
     assert not first.exists() and second.is_dir() and cache.get(_key(2)) == {"small": 1}
-    assert [p.name for p in first.parent.iterdir()] == []  # removed whole, no debris
+    assert [p.name for p in first.parent.parent.iterdir()] == []  # removed whole, no debris
 
 
 def test_clear_removes_entries_only(tmp_path: Path) -> None:
@@ -461,11 +462,12 @@ def test_cli_info_and_clear(tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
     cache.compute_dir(_key(2), lambda d: (d / "f").write_text("y" * 500))
     assert main(["cache", "info", "--cache-dir", str(root)]) == 0
     out = capsys.readouterr().out
-    assert str(root) in out and "entries  2 (1 trial results, 1 sequences)" in out and "2.5 kB" in out
+    assert str(root) in out and "entries  2 (1 trial results, 1 sequences)" in out and "2.8 kB" in out
     assert main(["cache", "info", "--cache-dir", str(root), "--json"]) == 0
     info = json.loads(capsys.readouterr().out)
     assert info == {"root": str(root), "entries": 2, "results": 1, "folders": 1, "bytes": cache.stats()["bytes"]}
-    assert info["bytes"] == cache.path(_key(1)).stat().st_size + 500
+    manifest = cache.path(_key(2), folder=True).parent / "manifest.json"
+    assert info["bytes"] == cache.path(_key(1)).stat().st_size + 500 + manifest.stat().st_size
     assert main(["cache", "clear", "--cache-dir", str(root)]) == 0
     assert f"removed 2 cache entries from {root}" in capsys.readouterr().out
     assert cache.stats()["entries"] == 0
