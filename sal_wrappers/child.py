@@ -28,6 +28,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from sal_wrappers.process_group import RunGuard, wait_unreaped
+
 __all__ = ["ChildOutcome", "describe_exit", "log_tail", "run_child", "write_result"]
 
 #: Exit statuses with a known meaning, for messages.
@@ -90,7 +92,9 @@ def run_child(
     """Run ``entry`` in a child process fed ``header`` and ``frames`` (see the module text).
 
     ``timeout`` (s) covers the whole run; past it the child is killed. The log is
-    ``workdir/log_name``; the result file ``workdir/<log stem>.result.json``.
+    ``workdir/log_name``; the result file ``workdir/<log stem>.result.json``. What the child
+    leaves behind when it exits is killed, and all of it when the calling process dies first
+    (``sal_wrappers.process_group.RunGuard``).
     """
     workdir = Path(workdir)
     workdir.mkdir(parents=True, exist_ok=True)
@@ -99,11 +103,44 @@ def run_child(
     result_path.unlink(missing_ok=True)
     start = time.monotonic()
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    with open(log_path, "wb") as log:
-        process = subprocess.Popen(
-            [sys.executable, "-m", "sal_wrappers.child", entry, str(result_path)],
-            stdin=subprocess.PIPE, stdout=log, stderr=subprocess.STDOUT, env=env, start_new_session=True,
-        )
+    with RunGuard() as guard:
+        with open(log_path, "wb") as log:
+            process = subprocess.Popen(
+                [sys.executable, "-m", "sal_wrappers.child", entry, str(result_path)],
+                stdin=subprocess.PIPE, stdout=log, stderr=subprocess.STDOUT, env=guard.environ(env), start_new_session=True,
+            )
+        guard.watch(process.pid)
+        status, timed_out, feed_error = _feed(process, header, frames, timeout)
+    wall = time.monotonic() - start
+    result = None
+    if result_path.is_file():
+        try:
+            result = json.loads(result_path.read_text())
+        except ValueError:
+            result = None
+    failure = None
+    if feed_error is not None:
+        raise feed_error
+    if timed_out:
+        failure = f"timed out after {timeout:g} s and was killed"
+    elif status != 0:
+        failure = describe_exit(status)
+    elif result is None:
+        failure = "the child exited without writing a result"
+    return ChildOutcome(result, status, failure, wall, log_path, log_tail(log_path))
+
+
+def write_result(path: Path, data: dict[str, Any]) -> None:
+    """Write the child's result JSON atomically (for entry points)."""
+    from sal_adapters.textfiles import atomic_write_text
+
+    atomic_write_text(Path(path), json.dumps(data))
+
+
+def _feed(process: subprocess.Popen[bytes], header: dict[str, Any], frames: Iterable[Any], timeout: float | None) -> tuple[int, bool, BaseException | None]:
+    """Stream the messages into the child and wait for it; ``(exit status, timed out, error
+    producing a frame)``. The child's process group is killed when it timed out, when a frame
+    could not be produced, and whatever is left of it when the child exits."""
     timed_out = threading.Event()
 
     def kill() -> None:
@@ -126,7 +163,7 @@ def run_child(
         except BaseException as exc:  # producing a frame failed (bad image): stop the child
             feed_error = exc
             _kill(process)
-        status = process.wait()
+        wait_unreaped(process)
     finally:
         if watchdog:
             watchdog.cancel()
@@ -134,33 +171,9 @@ def run_child(
             process.stdin.close()  # also when the child died mid-stream (no leaked pipe)
         except OSError:
             pass
-        if process.poll() is None:
-            _kill(process)
-            process.wait()
-    wall = time.monotonic() - start
-    result = None
-    if result_path.is_file():
-        try:
-            result = json.loads(result_path.read_text())
-        except ValueError:
-            result = None
-    failure = None
-    if feed_error is not None:
-        raise feed_error
-    if timed_out.is_set():
-        failure = f"timed out after {timeout:g} s and was killed"
-    elif status != 0:
-        failure = describe_exit(status)
-    elif result is None:
-        failure = "the child exited without writing a result"
-    return ChildOutcome(result, status, failure, wall, log_path, log_tail(log_path))
-
-
-def write_result(path: Path, data: dict[str, Any]) -> None:
-    """Write the child's result JSON atomically (for entry points)."""
-    from sal_adapters.textfiles import atomic_write_text
-
-    atomic_write_text(Path(path), json.dumps(data))
+        _kill(process)  # before reaping: the group id stays reserved until then
+        status = process.wait()
+    return status, timed_out.is_set(), feed_error
 
 
 def _messages(header: dict[str, Any], frames: Iterable[Any]) -> Iterator[Any]:
