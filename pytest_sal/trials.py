@@ -12,12 +12,18 @@ The cache key of a run holds everything that changes its result: the dataset fin
 configured module (name, version, every parameter), the seed, the system's identity (name,
 version, options, the content of the files it runs), the run's number and the runner version.
 An identical run in a later session, or in the other xdist worker, is read back instead of
-run again; a trial that needs more runs than were cached runs only the missing ones.
+run again; a trial that needs more runs than were cached runs only the missing ones. A stored
+run whose record lacks what the judge reads (``run_record_problem``) is discarded and run again.
+A run whose failure the machine decided (``machine_failure``: a timeout on a starved or
+oversubscribed machine, out of memory) counts in this session and is not stored, so the next
+session runs it again; its run says why under ``not_cached``.
 """
 
 from __future__ import annotations
 
 import math
+import numbers
+import signal
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -35,12 +41,22 @@ from pytest_sal.requirements import Requirement
 from sal_adapters import Sequence
 from sal_modules import perturb
 from sal_modules.refs import ParamRef
-from sal_wrappers import SlamSystem
+from sal_wrappers import RunResult, SlamSystem, TrackState, machine_load
 
-__all__ = ["NOISY_RUNS", "RUNNER_VERSION", "TrialRunner", "VotePolicy", "aggregate_metrics", "cached_sequence"]
+__all__ = [
+    "NOISY_RUNS",
+    "RUNNER_VERSION",
+    "TrialRunner",
+    "VotePolicy",
+    "aggregate_metrics",
+    "cached_sequence",
+    "machine_failure",
+    "run_record_problem",
+]
 
-#: Bumped when a change here changes cached results (2: one cache entry per run).
-RUNNER_VERSION = 2
+#: Bumped when a change here changes cached results (2: one cache entry per run; 3: entries
+#: carry a checksum, so entries of 2 are left to eviction and ``sal cache clear``).
+RUNNER_VERSION = 3
 #: Metrics aggregated over runs (median) into a trial's metrics.
 TRIAL_METRICS = ("ate_rmse", "rpe_trans", "rpe_rot", "tracking_rate", "scale_error", "first_tracked", "maps")
 
@@ -55,6 +71,57 @@ def aggregate_metrics(runs: list[dict[str, Any]]) -> dict[str, Any]:
         out[name] = float(np.median(known)) if known and 2 * len(known) > len(values) else None
     out["failures"] = [r["failure"] for r in runs if r.get("failure")]
     return out
+
+
+def run_record_problem(record: dict[str, Any]) -> str | None:
+    """What a stored run record lacks for judging, in words (``None``: it can be used):
+    ``metrics`` holds every metric of ``TRIAL_METRICS`` as a finite number or null, ``failure``
+    as text or null and ``starved`` as a bool; ``artifacts``, when present, maps names to paths."""
+    metrics = record.get("metrics")
+    if not isinstance(metrics, dict):
+        return "no 'metrics' object"
+    for name in TRIAL_METRICS:
+        value = metrics.get(name, "missing")
+        if value is not None and (not isinstance(value, numbers.Real) or isinstance(value, bool) or not math.isfinite(value)):
+            return f"metrics.{name} is {value!r:.40}, not a finite number or null"
+    if not isinstance(metrics.get("failure"), (str, type(None))) or not isinstance(metrics.get("starved"), bool):
+        return "metrics.failure is not text or null, or metrics.starved not a bool"
+    artifacts = record.get("artifacts", {})
+    if not isinstance(artifacts, dict) or not all(isinstance(v, str) for v in artifacts.values()):
+        return "artifacts is not an object of paths"
+    return None
+
+
+#: Words in a failure or log tail that say the run ran out of memory (Python, C++).
+_OUT_OF_MEMORY = ("MemoryError", "std::bad_alloc")
+
+
+def machine_failure(result: RunResult, load: dict[str, Any]) -> str | None:
+    """Why the machine, not the system, decided a failed run (it is then not cached), or ``None``.
+
+    The rule: a run that timed out (``failure`` starts with "timed out") is the machine's when
+    it fell behind the sensor clock (``RunResult.fell_behind``: starved even re-paced) or the
+    machine was busier than its cores when it started (``load``, a ``machine_load()`` taken
+    before the run: 1-minute load average above the usable cores); a timeout on a quiet machine
+    is the system's (it is too slow) and is cached. A run killed by SIGKILL without a timeout
+    (the kernel's out-of-memory killer), or whose failure or log ends in ``MemoryError`` or
+    ``std::bad_alloc``, ran out of memory: the machine's.
+    """
+    failure = result.failure
+    if failure is None:
+        return None
+    if failure.startswith("timed out"):
+        if result.fell_behind:
+            return f"timed out while starved: it fell behind the sensor clock ({result.load.get('fell_behind_reason')})"
+        cores = int(load.get("usable_cpus") or load["cpus"])
+        if float(load["loadavg"][0]) > cores:
+            return f"timed out on a busy machine: load average {float(load['loadavg'][0]):.1f} on {cores} cores when it started"
+        return None
+    if result.exit_status == -signal.SIGKILL:
+        return "killed by SIGKILL without a timeout: the out-of-memory killer, most likely"
+    if any(word in failure or word in result.log_tail for word in _OUT_OF_MEMORY):
+        return "ran out of memory"
+    return None
 
 
 @dataclass(frozen=True)
@@ -194,10 +261,12 @@ class TrialRunner:
             if self.cache is None:
                 data, cached = self._run(trial.value, key, number), False
             else:
-                data, cached = self.cache.compute(key, lambda: self._run(trial.value, key, number))
+                data, cached = self.cache.compute(key, lambda: self._run(trial.value, key, number), check=run_record_problem, transient=_not_cached)
             passed = self.requirement.holds(data["metrics"])
             # a run the machine starved is no evidence that the system failed: it gets no vote
             run = dict(data["metrics"], passed=passed, abstained=bool(data["metrics"].get("starved")) and not passed, cached=cached)
+            if data.get("not_cached"):
+                run["not_cached"] = data["not_cached"]
             trial.runs.append(run)
             trial.artifacts.update({k: v for k, v in data.get("artifacts", {}).items() if k not in trial.artifacts})
             added = True
@@ -220,9 +289,20 @@ class TrialRunner:
             perturbed = cached_sequence(perturbed, self.cache)
         groundtruth = perturbed.groundtruth
         folder = self.cache.root / "artifacts" if self.cache is not None and self.artifacts and number == 0 else None
-        result = self.system.run(perturbed, self.workdir / f"{key[:12]}-run{number}", timeout=self.timeout)
+        load = machine_load()
+        try:
+            result = self.system.run(perturbed, self.workdir / f"{key[:12]}-run{number}", timeout=self.timeout)
+        except MemoryError:
+            states = np.full(len(perturbed), TrackState.NOT_INITIALISED, dtype=np.int8)
+            result = RunResult(
+                system=self.system.name, sequence=perturbed.name, sensor=perturbed.sensor, timestamps=perturbed.timestamps,
+                states=states, failure="out of memory (MemoryError)",
+            )
         scored = evaluate(result, groundtruth)
         metrics = scored.to_dict()
+        for name in TRIAL_METRICS:  # NaN judges like null, and a stored record holds no NaN
+            if metrics[name] is not None and not math.isfinite(metrics[name]):
+                metrics[name] = None
         metrics["wall_time_s"] = result.wall_time_s
         metrics["starved"] = result.fell_behind  # the machine could not feed it even re-paced
         metrics["load"] = result.load
@@ -235,7 +315,9 @@ class TrialRunner:
                 artifacts["trajectory"] = str(plot_trajectories(groundtruth, {self.system.name: scored.ate.estimate}, folder / f"{key}-trajectory.png", title=title))
             if len(perturbed):
                 artifacts["frame"] = str(_example_frame(perturbed, folder / f"{key}.png"))
-        return {"value": value, "module": module.to_dict(), "metrics": metrics, "artifacts": artifacts}
+        record = {"value": value, "module": module.to_dict(), "metrics": metrics, "artifacts": artifacts}
+        reason = machine_failure(result, load)
+        return record if reason is None else {**record, "not_cached": reason}
 
 
 def cached_sequence(sequence: Sequence, cache: ContentCache, *, progress: bool = False) -> Sequence:
@@ -248,6 +330,11 @@ def cached_sequence(sequence: Sequence, cache: ContentCache, *, progress: bool =
     options = {"stereo": True} if sequence.sensor == "stereo" and "stereo" in DATASETS.get(sequence.kind).option_names() else {}
     reopened = open_dataset(sequence.kind, folder, **options)
     return reopened.replace(name=sequence.name, meta=dict(reopened.meta, perturbation=sequence.meta.get("perturbation")))
+
+
+def _not_cached(record: dict[str, Any]) -> str | None:
+    """Why a run record must not be stored (``TrialRunner._run`` sets it): the machine decided it."""
+    return record.get("not_cached")
 
 
 def _same(a: np.ndarray | None, b: np.ndarray | None) -> bool:

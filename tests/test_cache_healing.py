@@ -1,0 +1,254 @@
+"""Cache entries that heal (issue 12, point 5): each attack on a stored trial run or cached frame
+ends in one CacheWarning naming the entry and a recomputed, identical result; a read-only cache
+serves what it holds; a failure the machine decided is not stored."""
+
+from __future__ import annotations
+
+import errno
+import hashlib
+import json
+import math
+import os
+import signal
+import warnings
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from pytest_sal import tracking_rate
+from pytest_sal.cache import CacheWarning, ContentCache
+from pytest_sal.cache_keys import cache_key
+from pytest_sal.requirements import Requirement
+from pytest_sal.testing import FakeSlam
+from pytest_sal.trials import TrialRunner, cached_sequence
+from sal_adapters import Sequence, open_dataset
+from sal_modules import create, fog, perturb
+from sal_wrappers import RunResult
+
+QUIET = {"loadavg": [0.1, 0.1, 0.1], "cpus": 16, "usable_cpus": 16}
+
+
+@pytest.fixture(autouse=True)
+def quiet_machine(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The machine these tests run on is shared: its load average must not decide a verdict."""
+    monkeypatch.setattr("pytest_sal.trials.machine_load", lambda: QUIET)
+
+
+def runner(tmp_path: Path, system: FakeSlam) -> TrialRunner:
+    dataset = open_dataset("synthetic", scene="indoor", frames=8, sensor="rgbd")
+    requirement = Requirement.build([tracking_rate >= 0.5, fog.visibility_m >= 25])
+    return TrialRunner(dataset, fog.visibility_m.ref(), system, requirement, cache=ContentCache(tmp_path / "cache"), workdir=tmp_path / "work")
+
+
+def cache_warnings(fn: Callable[[], Any]) -> tuple[Any, list[str]]:
+    """``fn()`` and the messages of the CacheWarnings it gave."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        value = fn()
+    return value, [str(w.message) for w in caught if issubclass(w.category, CacheWarning)]
+
+
+def calls(path: Path) -> int:
+    return len(path.read_text().splitlines()) if path.exists() else 0
+
+
+def repacked(data: dict[str, Any]) -> bytes:
+    """An entry holding ``data`` with a checksum that matches (a forger's edit)."""
+    payload = json.dumps(data, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
+    return json.dumps({"sha256": hashlib.sha256(payload.encode()).hexdigest(), "data": data}).encode()
+
+
+def edited(field: str, value: float) -> Callable[[bytes], bytes]:
+    def edit(raw: bytes) -> bytes:
+        entry = json.loads(raw)
+        entry["data"]["metrics"][field] = value  # the checksum is left as it was
+        return json.dumps(entry).encode()
+
+    return edit
+
+
+def forged(field: str, value: Any) -> Callable[[bytes], bytes]:
+    def edit(raw: bytes) -> bytes:
+        data = json.loads(raw)["data"]
+        data["metrics"][field] = value
+        return repacked(data)
+
+    return edit
+
+
+ATTACKS: dict[str, tuple[Callable[[bytes], bytes], str]] = {
+    "byte 0xff": (lambda raw: raw[:40] + b"\xff" + raw[41:], "not UTF-8 (byte 0xff at offset 40)"),
+    "{}": (lambda raw: b"{}", "no checksum: keys (none)"),
+    "truncated": (lambda raw: raw[: len(raw) // 2], "not JSON ("),
+    "empty": (lambda raw: b"", ": empty"),
+    "ATE edited to 99": (edited("ate_rmse", 99.0), "checksum mismatch"),
+    "ATE edited to NaN": (edited("ate_rmse", math.nan), "checksum mismatch"),
+    "tracking rate edited to 1": (edited("tracking_rate", 1.0), "checksum mismatch"),
+    "{} with its checksum": (lambda raw: repacked({}), "no 'metrics' object"),
+    "NaN with its checksum": (forged("ate_rmse", math.nan), "metrics.ate_rmse is nan, not a finite number or null"),
+    "text with its checksum": (forged("tracking_rate", "0.9"), "metrics.tracking_rate is '0.9'"),
+}
+
+
+@pytest.mark.parametrize("attack", list(ATTACKS))
+def test_an_attacked_trial_entry_is_discarded_and_run_again(tmp_path: Path, attack: str) -> None:
+    damage, expected = ATTACKS[attack]
+    log = tmp_path / "calls.jsonl"
+    first = runner(tmp_path, FakeSlam(calls_file=str(log))).evaluate(20.0)
+    session = runner(tmp_path, FakeSlam(calls_file=str(log)))
+    entry = session.cache.path(session.key(20.0, 0))
+    entry.write_bytes(damage(entry.read_bytes()))
+    again, messages = cache_warnings(lambda: session.evaluate(20.0))
+    assert len(messages) == 1 and messages[0].startswith(f"{entry}: bad cache entry, removed and computed again: ")
+    assert expected in messages[0] and "\n" not in messages[0]
+    assert calls(log) == 2 and not again.cached and again.metrics == first.metrics and again.passed == first.passed
+    healed, messages = cache_warnings(lambda: runner(tmp_path, FakeSlam(calls_file=str(log))).evaluate(20.0))
+    assert messages == [] and healed.cached and healed.metrics == first.metrics and calls(log) == 2
+
+
+def foggy_room() -> Sequence:
+    return perturb(open_dataset("synthetic", scene="indoor", frames=6, sensor="rgbd"), create("fog", visibility_m=4.0), seed=3)
+
+
+def assert_same_frames(copy: Sequence, fresh: Sequence) -> None:
+    assert len(copy) == len(fresh)
+    for k in range(len(fresh)):
+        np.testing.assert_array_equal(copy[k].image, fresh[k].image)
+        np.testing.assert_allclose(copy[k].depth, fresh[k].depth, atol=1e-6)
+
+
+@pytest.mark.parametrize("damage", ["truncated", "same size, other bytes", "removed", "added", "no manifest"])
+def test_a_damaged_cached_frame_is_rendered_again(tmp_path: Path, damage: str) -> None:
+    foggy = foggy_room()
+    cache = ContentCache(tmp_path / "cache")
+    cached_sequence(foggy, cache)
+    files = cache.path(cache_key(frames=foggy.fingerprint), folder=True)
+    manifest = (files.parent / "manifest.json").read_bytes()
+    frame = sorted(p for p in files.rglob("*.png"))[3]
+    raw = frame.read_bytes()
+    if damage == "truncated":
+        frame.write_bytes(raw[: len(raw) // 3])
+    elif damage == "same size, other bytes":
+        frame.write_bytes(raw[:100] + bytes(b ^ 0x5A for b in raw[100:200]) + raw[200:])
+    elif damage == "removed":
+        frame.unlink()
+    elif damage == "added":
+        (files / "stray.png").write_bytes(raw)
+    else:  # an entry from before manifests
+        (files.parent / "manifest.json").unlink()
+    copy, messages = cache_warnings(lambda: cached_sequence(foggy, ContentCache(tmp_path / "cache")))  # the next session
+    assert len(messages) == 1 and messages[0].startswith(f"{files.parent}: bad cache entry, removed and computed again: ")
+    expected = {"truncated": "bytes, manifest.json says", "same size, other bytes": "content differs from its SHA-256", "removed": "is missing",
+                "added": "data/stray.png is not in manifest.json", "no manifest": "no manifest.json"}[damage]
+    assert expected in messages[0]
+    assert_same_frames(copy, foggy)
+    assert (files.parent / "manifest.json").read_bytes() == manifest  # the same files, byte for byte
+    _, messages = cache_warnings(lambda: cached_sequence(foggy, ContentCache(tmp_path / "cache")))
+    assert messages == []
+
+
+@pytest.fixture
+def read_only(monkeypatch: pytest.MonkeyPatch) -> Callable[[Path], None]:
+    """``read_only(root)``: from now on every write under ``root`` fails with EROFS, as on a
+    read-only mount (the tests run as root, which ignores file modes)."""
+
+    def mount(root: Path) -> None:
+        def guard(real: Callable[..., Any]) -> Callable[..., Any]:
+            def refuse(path: Any, *args: Any, **kwargs: Any) -> Any:
+                writes = real is not real_open or args[0] & (os.O_WRONLY | os.O_RDWR | os.O_CREAT)
+                if writes and os.path.abspath(os.fspath(path)).startswith(str(root)):
+                    raise OSError(errno.EROFS, os.strerror(errno.EROFS), os.fspath(path))
+                return real(path, *args, **kwargs)
+
+            return refuse
+
+        real_open = os.open
+        for name in ("open", "mkdir", "rename", "replace", "unlink", "rmdir", "utime"):
+            monkeypatch.setattr(os, name, guard(getattr(os, name)))
+
+    return mount
+
+
+def snapshot(root: Path) -> dict[str, tuple[int, int]]:
+    return {str(p.relative_to(root)): (p.stat().st_size, p.stat().st_mtime_ns) for p in sorted(root.rglob("*"))}
+
+
+def test_a_read_only_cache_serves_its_entries_and_stores_nothing(tmp_path: Path, read_only: Callable[[Path], None]) -> None:
+    root = tmp_path / "cache"
+    writer = ContentCache(root)
+    writer.put(cache_key(n=1), {"ate": 0.5})
+    writer.put(cache_key(n=9), {"ate": 0.9})
+    writer.compute_dir(cache_key(n=2), lambda folder: (folder / "f.png").write_bytes(b"png"))
+    writer.path(cache_key(n=9)).write_bytes(b"\xff")
+    before = snapshot(root)
+    read_only(root)
+    cache = ContentCache(root)
+
+    def session() -> list[Any]:
+        return [
+            cache.compute(cache_key(n=1), lambda: {"ate": 7.0}),
+            cache.compute_dir(cache_key(n=2), lambda folder: None),
+            cache.compute(cache_key(n=3), lambda: {"ate": 0.3}),
+            cache.compute(cache_key(n=4), lambda: {"ate": 0.4}),
+            cache.compute_dir(cache_key(n=5), lambda folder: (folder / "g.png").write_bytes(b"new")),
+            cache.compute(cache_key(n=9), lambda: {"ate": 0.95}),
+        ]
+
+    (hit, folder_hit, miss, other_miss, folder_miss, bad), messages = cache_warnings(session)
+    assert hit == ({"ate": 0.5}, True) and folder_hit == (cache.path(cache_key(n=2), folder=True), True)
+    assert miss == ({"ate": 0.3}, False) and other_miss == ({"ate": 0.4}, False) and bad == ({"ate": 0.95}, False)
+    assert folder_miss[1] is False and (folder_miss[0] / "g.png").read_bytes() == b"new" and root not in folder_miss[0].parents
+    assert messages[0] == f"the cache at {root} is read-only (Read-only file system): the entries it holds are used, new results are computed and not stored"
+    assert len(messages) == 2 and messages[1].startswith(f"{cache.path(cache_key(n=9))}: bad cache entry, ignored (the cache is read-only)")
+    assert cache.read_only == "Read-only file system" and cache.get(cache_key(n=1)) == {"ate": 0.5}
+    assert snapshot(root) == before  # nothing written, removed or touched
+
+
+class Failing(FakeSlam):
+    """Tracks nothing and fails as ``how`` says (or raises MemoryError)."""
+
+    def __init__(self, how: dict[str, Any] | None, **options: Any):
+        super().__init__(**options)
+        self.how = how
+
+    def run(self, sequence: Sequence, workdir: Path, timeout: float | None = None) -> RunResult:
+        result = super().run(sequence, workdir, timeout)
+        if self.how is None:
+            raise MemoryError
+        data = result.to_dict()
+        data.update(states=["lost"] * len(result.states), trajectory=None, **self.how)
+        return RunResult.from_dict(data)
+
+
+TIMEOUT = "timed out after 60 s and was killed"
+BUSY = {"loadavg": [7.9, 6.0, 4.0], "cpus": 2, "usable_cpus": 2}
+FAILURES: dict[str, tuple[dict[str, Any] | None, dict[str, Any], str | None]] = {
+    "timeout, starved": ({"failure": TIMEOUT, "exit_status": -9, "fell_behind": True}, QUIET, "timed out while starved: it fell behind the sensor clock"),
+    "timeout, busy machine": ({"failure": TIMEOUT, "exit_status": -9}, BUSY, "timed out on a busy machine: load average 7.9 on 2 cores when it started"),
+    "timeout, quiet machine": ({"failure": TIMEOUT, "exit_status": -9}, QUIET, None),
+    "SIGKILL, no timeout": ({"failure": "killed by SIGKILL (killed)", "exit_status": -signal.SIGKILL}, QUIET, "killed by SIGKILL without a timeout"),
+    "MemoryError in the child": ({"failure": "exit status 1", "exit_status": 1, "log_tail": "  ...\nMemoryError"}, QUIET, "ran out of memory"),
+    "MemoryError in process": (None, QUIET, "ran out of memory"),
+    "segfault": ({"failure": "killed by SIGSEGV (segmentation fault)", "exit_status": -signal.SIGSEGV}, QUIET, None),
+}
+
+
+@pytest.mark.parametrize("case", list(FAILURES))
+def test_a_failure_the_machine_decided_is_not_cached(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, case: str) -> None:
+    how, load, reason = FAILURES[case]
+    monkeypatch.setattr("pytest_sal.trials.machine_load", lambda: load)
+    log = tmp_path / "calls.jsonl"
+    first = runner(tmp_path, Failing(how, calls_file=str(log)))
+    trial = first.evaluate(40.0)
+    assert not trial.passed and trial.metrics["tracking_rate"] == 0.0  # this session's verdict stands
+    if reason is None:
+        assert "not_cached" not in trial.runs[0]
+    else:
+        assert trial.runs[0]["not_cached"].startswith(reason)
+    assert first.cache.path(first.key(40.0, 0)).exists() == (reason is None)
+    again = runner(tmp_path, Failing(how, calls_file=str(log))).evaluate(40.0)
+    assert calls(log) == (2 if reason else 1) and again.cached == (reason is None)  # the next session runs it again
+
