@@ -191,7 +191,8 @@ class ContentCache:
         """Where the entry of ``key`` lives: a ``.json`` file, or when ``folder`` the folder of
         files that :meth:`compute_dir` returns (``data/`` in the entry, beside its manifest)."""
         _check_key(key)
-        return self.root / key[:2] / (key + "/" + _FILES if folder else key + ".json")
+        shard = self.root / key[:2]
+        return shard / key / _FILES if folder else shard / f"{key}.json"
 
     # ---- result entries
 
@@ -379,10 +380,10 @@ class ContentCache:
         except OSError as exc:
             if exc.errno not in _READ_ONLY:
                 raise CacheError(f"cannot create the cache folder: {exc.strerror}", root) from None
-            self.read_only = exc.strerror or errno.errorcode.get(exc.errno or 0, str(exc))
+            self.read_only = exc.strerror or str(exc)
             warnings.warn(CacheWarning(
                 f"the cache at {root} is read-only ({self.read_only}): the entries it holds are used, new results are computed and not stored"
-            ), stacklevel=4)
+            ), stacklevel=3)
             return False
         gitignore = root / ".gitignore"
         if fresh and not gitignore.exists():
@@ -429,7 +430,7 @@ class ContentCache:
         if problem is None:
             return
         done = "ignored (the cache is read-only)" if self.read_only else "removed"
-        warnings.warn(CacheWarning(f"{path}: bad cache entry, {done} and computed again: {problem}"), stacklevel=4)
+        warnings.warn(CacheWarning(f"{path}: bad cache entry, {done} and computed again: {problem}"), stacklevel=3)
         self._hashed.discard(key)
         if self.read_only is None:
             self._bury(key, path)
@@ -451,7 +452,10 @@ class ContentCache:
         manifest, problem = _unpack(raw)
         if manifest is None:
             return False, f"{_MANIFEST}: {problem}"
-        problem = _mismatch(manifest.get("files"), _listing(files, hashes=key not in self._hashed))
+        try:
+            problem = _mismatch(manifest.get("files"), _listing(files, hashes=key not in self._hashed))
+        except OSError as exc:
+            problem = f"cannot read {exc.filename} ({exc.strerror})"
         if problem is not None:
             return False, problem
         self._hashed.add(key)
@@ -608,10 +612,7 @@ def _listing(folder: Path, hashes: bool) -> dict[str, list[Any]]:
     for base, _dirs, names in os.walk(folder):
         for name in names:
             path = os.path.join(base, name)
-            try:
-                out[os.path.relpath(path, folder)] = [os.stat(path).st_size, _file_sha256(path) if hashes else None]
-            except FileNotFoundError:  # a dangling link
-                out[os.path.relpath(path, folder)] = [None, None]
+            out[os.path.relpath(path, folder)] = [os.stat(path).st_size, _file_sha256(path) if hashes else None]
     return out
 
 
