@@ -81,11 +81,15 @@ def run_record_problem(record: dict[str, Any]) -> str | None:
     if not isinstance(metrics, dict):
         return "no 'metrics' object"
     for name in TRIAL_METRICS:
-        value = metrics.get(name, "missing")
+        if name not in metrics:
+            return f"metrics.{name} is missing"
+        value = metrics[name]
         if value is not None and (not isinstance(value, numbers.Real) or isinstance(value, bool) or not math.isfinite(value)):
             return f"metrics.{name} is {value!r:.40}, not a finite number or null"
-    if not isinstance(metrics.get("failure"), (str, type(None))) or not isinstance(metrics.get("starved"), bool):
-        return "metrics.failure is not text or null, or metrics.starved not a bool"
+    if not isinstance(metrics.get("failure"), (str, type(None))):
+        return "metrics.failure is not text or null"
+    if not isinstance(metrics.get("starved"), bool):
+        return "metrics.starved is not true or false"
     artifacts = record.get("artifacts", {})
     if not isinstance(artifacts, dict) or not all(isinstance(v, str) for v in artifacts.values()):
         return "artifacts is not an object of paths"
@@ -265,8 +269,8 @@ class TrialRunner:
             passed = self.requirement.holds(data["metrics"])
             # a run the machine starved is no evidence that the system failed: it gets no vote
             run = dict(data["metrics"], passed=passed, abstained=bool(data["metrics"].get("starved")) and not passed, cached=cached)
-            if data.get("not_cached"):
-                run["not_cached"] = data["not_cached"]
+            if reason := _not_cached(data):
+                run["not_cached"] = reason
             trial.runs.append(run)
             trial.artifacts.update({k: v for k, v in data.get("artifacts", {}).items() if k not in trial.artifacts})
             added = True

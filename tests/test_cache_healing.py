@@ -90,6 +90,8 @@ ATTACKS: dict[str, tuple[Callable[[bytes], bytes], str]] = {
     "{} with its checksum": (lambda raw: repacked({}), "no 'metrics' object"),
     "NaN with its checksum": (forged("ate_rmse", math.nan), "metrics.ate_rmse is nan, not a finite number or null"),
     "text with its checksum": (forged("tracking_rate", "0.9"), "metrics.tracking_rate is '0.9'"),
+    "metric dropped, with its checksum": (lambda raw: repacked({**json.loads(raw)["data"], "metrics": {}}), "metrics.ate_rmse is missing"),
+    "starved as text, with its checksum": (forged("starved", "no"), "metrics.starved is not true or false"),
 }
 
 
