@@ -21,6 +21,7 @@ from scipy.spatial.transform import Rotation
 from sal_adapters.errors import SalError
 from sal_adapters.trajectory import Trajectory
 from sal_wrappers.base import RunResult
+from sal_wrappers.command import WRITTEN_BEFORE_FAILURE
 
 __all__ = [
     "AGGREGATED",
@@ -275,7 +276,8 @@ class RunMetrics:
     ``scale_error`` (``|1 - s|``, monocular runs only: how far the map's arbitrary initial
     scale is from metric, see ``scale_error``) need ground truth and at least
     ``MIN_POSES`` tracked poses. ``failure`` says why a run failed (the system's own reason,
-    too few poses, nothing associated); ``ate`` keeps the full ATE for plots.
+    too few poses, nothing associated); a run that wrote its trajectory before it crashed has
+    both its accuracy values and its ``failure``. ``ate`` keeps the full ATE for plots.
     """
 
     system: str
@@ -324,7 +326,9 @@ def evaluate(
     tolerance follows the frame rate of ``result.timestamps``. A run that failed, whose
     scored trajectory has fewer than ``MIN_POSES`` poses or that does not associate with the
     ground truth gets ``failure`` set and no accuracy values; RPE is ``None`` (and ATE kept)
-    when the trajectory is shorter than ``rpe_delta``.
+    when the trajectory is shorter than ``rpe_delta``. A run whose system wrote its trajectory
+    before it failed (``info["written_before_failure"]``: a program that crashed at shutdown) is
+    scored all the same and keeps ``failure``: the requirement judges its metrics.
     """
     align = align or ("sim3" if result.sensor == "mono" else "se3")
     base = dict(
@@ -343,12 +347,12 @@ def evaluate(
         has_groundtruth=groundtruth is not None,
     )
     poses = 0 if result.trajectory is None else len(result.trajectory)
-    if result.failure is not None:
+    if result.failure is not None and not (result.info.get(WRITTEN_BEFORE_FAILURE) and poses >= MIN_POSES):
         return RunMetrics(**base, failure=result.failure)
     if poses < MIN_POSES:
         return RunMetrics(**base, failure=f"{poses} pose(s) in the scored trajectory: too few to score (need {MIN_POSES})")
     if groundtruth is None:
-        return RunMetrics(**base)
+        return RunMetrics(**base, failure=result.failure)
     fps = _frame_rate(result.timestamps)
     try:
         absolute = ate(result.trajectory, groundtruth, align=align, max_diff=max_diff, fps=fps)
@@ -370,6 +374,7 @@ def evaluate(
         rpe_rot=None if relative is None else relative.rot.rmse,
         scale=scale,
         scale_error=mono_scale_error,
+        failure=result.failure,
         ate=absolute,
     )
 

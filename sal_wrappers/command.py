@@ -33,6 +33,12 @@ the staged sequence (the times in its ``times.txt`` / ``rgb.txt`` / ``data.csv``
 tracked (OK) when a pose lies within half a frame period of its time; frames before the first
 tracked one are NOT_INITIALISED, untracked frames after it LOST. With ``keyframes=True`` (the
 file holds keyframes only) every frame from the first to the last pose counts as tracked.
+
+A program that crashes or exits non-zero after writing a trajectory that this run wrote and
+that matches the frames (ORB-SLAM3 sometimes crashes at shutdown) keeps its trajectory and
+tracking states: ``failure`` says how it ended, and ``info["written_before_failure"]`` tells
+the scoring (``pytest_sal.metrics.evaluate``) to score it all the same. A timed-out run is not
+scored (the file may have been half written when the program was killed).
 """
 
 from __future__ import annotations
@@ -72,7 +78,10 @@ from sal_wrappers.command_output import (
 )
 from sal_wrappers.process_group import run_process_group
 
-__all__ = ["PLACEHOLDERS", "CommandSystem"]
+__all__ = ["PLACEHOLDERS", "WRITTEN_BEFORE_FAILURE", "CommandSystem"]
+
+#: ``RunResult.info`` key: the program wrote its trajectory and then failed; it is scored.
+WRITTEN_BEFORE_FAILURE = "written_before_failure"
 
 #: Every placeholder and what it becomes (paths are absolute).
 PLACEHOLDERS: dict[str, str] = {
@@ -469,6 +478,9 @@ class CommandSystem(SlamSystem):
             failure = f"timed out after {timeout:g} s and was killed"
         elif status != 0:
             failure = describe_exit(status) + (" (command not found by the shell or prefix)" if status == 127 else "")
+            if scored is not None and output_error is None:  # it crashed after writing its trajectory (at shutdown)
+                failure += f" after writing its trajectory ({info['poses']} poses: kept and scored)"
+                info[WRITTEN_BEFORE_FAILURE] = True
         else:
             failure = output_error
         if output_error is not None and failure != output_error:

@@ -511,6 +511,43 @@ def test_editing_the_script_invalidates_cached_trials(tmp_path):
     assert edited.metrics["ate_rmse"] > 10 * first.metrics["ate_rmse"]
 
 
+@pytest.mark.parametrize(
+    ("crash", "words"),
+    [
+        pytest.param("import os, signal; os.kill(os.getpid(), signal.SIGSEGV)", "killed by SIGSEGV (segmentation fault)", id="segfault"),
+        pytest.param("import sys; sys.exit(139)", "exit status 139", id="exit-139"),
+    ],
+)
+def test_a_crash_after_writing_the_trajectory_keeps_it_and_its_ate(tmp_path, crash, words):
+    """Issue 12 point 8: the README's promise, end to end through a trial."""
+    clean = drift_script(tmp_path / "clean.py", 0.0001)
+    crashing = drift_script(tmp_path / "crashing.py", 0.0001)
+    crashing.write_text(crashing.read_text() + crash + "\n")
+
+    def trial(script: Path):
+        system = create("command", argv=[sys.executable, str(script), "{sequence}", "{output}"], layout="tum", deterministic=True)
+        return trial_runner(tmp_path / script.stem, system).evaluate(30.0)
+
+    good, crashed = trial(clean), trial(crashing)
+    run = crashed.runs[0]
+    assert run["failure"] == f"{words} after writing its trajectory (8 poses: kept and scored)"
+    assert run["ate_rmse"] is not None and run["ate_rmse"] == pytest.approx(good.runs[0]["ate_rmse"])
+    assert run["tracking_rate"] == 1.0 and run["passed"]
+    assert crashed.passed and crashed.metrics["ate_rmse"] == pytest.approx(good.metrics["ate_rmse"])
+    assert crashed.metrics["failures"] == [run["failure"]] and good.metrics["failures"] == []
+
+
+def test_a_crash_after_writing_an_unreadable_trajectory_is_not_scored(scripts, short, tmp_path):
+    """Only a trajectory that this run wrote, that reads back and that matches the frames is scored."""
+    from pytest_sal.metrics import evaluate
+
+    argv = ["sh", "-c", f'"{sys.executable}" "$0" "$1"; kill -SEGV $$', str(scripts / "garbage.py"), "{output}"]
+    result = create("command", argv=argv, sensor="mono", layout="folder").run(short, tmp_path / "w", timeout=30)
+    assert result.exit_status == -11 and result.failure == "killed by SIGSEGV (segmentation fault)"
+    assert "written_before_failure" not in result.info and result.info["output_error"].startswith("unparsable output")
+    assert evaluate(result, short.groundtruth).ate_rmse is None
+
+
 def test_depends_files_and_folders_are_part_of_the_key(tmp_path):
     script = drift_script(tmp_path / "myslam.py", 0.0)
     lib = tmp_path / "lib"
