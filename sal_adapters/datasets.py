@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import inspect
 import json
-import shutil
-import tempfile
 from abc import ABC, abstractmethod
 from collections.abc import Iterable
 from pathlib import Path
@@ -18,9 +16,11 @@ from typing import Any
 
 from tqdm.auto import tqdm
 
+from sal_adapters.atomic import replacing_dir, writing
 from sal_adapters.errors import DatasetError
 from sal_adapters.plugins import EntryPointRegistry
 from sal_adapters.sequence import Frame, Sequence
+from sal_adapters.textfiles import atomic_write_text
 
 __all__ = [
     "DatasetKind",
@@ -123,22 +123,25 @@ def truncate(sequence: Sequence, start: int = 0, max_frames: int | None = None) 
 def write_sequence(sequence: Sequence, out_dir: str | Path, layout: str | None = None, progress: bool = False) -> Path:
     """Write ``sequence`` in its own dataset layout (or ``layout``) under ``out_dir``.
 
-    The folder is filled through a temporary sibling and renamed into place, so a run killed
-    midway leaves no half-written copy. An existing ``out_dir`` must be empty or an earlier
-    output of this function (it is replaced). Never writes into the sequence's source folder.
+    The folder is filled through a hidden sibling and swapped into place when complete
+    (``sal_adapters.atomic``), so a run killed midway leaves the previous copy, never a half
+    written one. An existing ``out_dir`` must be empty or an earlier output of this function
+    (it is replaced). Never writes into the sequence's source folder. A folder that cannot be
+    written raises ``WriteError`` naming it.
 
     Returns:
         The path to give ``open_dataset(layout, path)`` to read the copy back.
     """
     kind = layout or sequence.kind
     dataset = DATASETS.get(kind)
-    out_dir = Path(out_dir).expanduser().resolve()
+    try:
+        out_dir = Path(out_dir).expanduser().resolve()
+    except RuntimeError:  # Python < 3.13 on a symlink loop
+        raise DatasetError("the output path runs into a symlink loop; choose another output folder", out_dir) from None
     _refuse_source_overlap(sequence, out_dir)
     if out_dir.exists() and any(out_dir.iterdir()) and not (out_dir / WRITTEN_MARKER).is_file():
         raise DatasetError("output folder is not empty and was not written by pytest-sal; choose an empty folder", out_dir)
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.partial-", dir=out_dir.parent))
-    try:
+    with writing(out_dir), replacing_dir(out_dir) as staging:
         frames: Iterable[Frame] = iter(sequence)
         if progress:
             frames = tqdm(frames, total=len(sequence), desc=f"writing {sequence.name}", unit="frame")
@@ -150,13 +153,7 @@ def write_sequence(sequence: Sequence, out_dir: str | Path, layout: str | None =
             "frames": len(sequence),
             "source_fingerprint": sequence.fingerprint,
         }
-        (staging / WRITTEN_MARKER).write_text(json.dumps(marker, indent=2) + "\n")
-        if out_dir.exists():
-            shutil.rmtree(out_dir)
-        staging.rename(out_dir)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
+        atomic_write_text(staging / WRITTEN_MARKER, json.dumps(marker, indent=2) + "\n")
     return out_dir / marker["path"]
 
 

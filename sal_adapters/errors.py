@@ -1,14 +1,15 @@
 """Error and warning classes shared by every pytest-sal package.
 
 ``SalError`` is the one root: the plugin and the ``sal`` command catch it and print its
-message without a traceback. ``DatasetError`` names the file (and line) that is wrong.
+message without a traceback. ``DatasetError`` names the file (and line) that is wrong;
+``WriteError`` the file or folder that could not be written.
 """
 
 from __future__ import annotations
 
 from os import PathLike
 
-__all__ = ["SalError", "DatasetError", "DatasetWarning"]
+__all__ = ["SalError", "DatasetError", "DatasetWarning", "WriteError"]
 
 
 class SalError(Exception):
@@ -29,6 +30,18 @@ class DatasetError(SalError, ValueError):
         if self.path is not None:
             where = f"{self.path}:{line}: " if line is not None else f"{self.path}: "
         super().__init__(where + message)
+
+
+class WriteError(SalError, OSError):
+    """A file or folder could not be written (disk full, read-only, a file where a folder
+    belongs): ``cannot write PATH: No space left on device``. It is an ``OSError`` too, with
+    the cause's ``errno`` and ``strerror`` and ``filename`` = the path."""
+
+    def __init__(self, path: str | PathLike[str], cause: OSError):
+        super().__init__(cause.errno, cause.strerror or str(cause), str(path))
+
+    def __str__(self) -> str:
+        return f"cannot write {self.filename}: {self.strerror}"
 
 
 class DatasetWarning(UserWarning):

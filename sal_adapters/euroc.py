@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from sal_adapters.atomic import copy_tree
 from sal_adapters.camera import Camera
 from sal_adapters.datasets import DatasetKind
 from sal_adapters.errors import DatasetError, DatasetWarning
@@ -191,9 +192,9 @@ class EurocDataset(DatasetKind):
         source_mav0 = None if sequence.source is None else sequence.source / "mav0"
         if from_euroc and source_mav0 is not None:
             if (source_mav0 / "imu0").is_dir():
-                shutil.copytree(source_mav0 / "imu0", mav0 / "imu0")
+                copy_tree(source_mav0 / "imu0", mav0 / "imu0")  # with the umask's modes, not the source's
             if (source_mav0 / "body.yaml").is_file():
-                shutil.copy2(source_mav0 / "body.yaml", mav0 / "body.yaml")
+                shutil.copyfile(source_mav0 / "body.yaml", mav0 / "body.yaml")
         return seq_dir
 
 

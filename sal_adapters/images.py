@@ -2,15 +2,13 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
-from collections.abc import Iterator
-from contextlib import contextmanager
+import io
 from pathlib import Path
 
 import cv2
 import numpy as np
 
+from sal_adapters.atomic import staged_file
 from sal_adapters.errors import DatasetError
 
 __all__ = ["IMAGE_SUFFIXES", "is_grey", "probe_image", "read_depth", "read_image", "scaled_to_width", "write_depth", "write_image"]
@@ -75,11 +73,10 @@ def write_image(path: Path, rgb: np.ndarray, grey: bool = False) -> None:
 def write_depth(path: Path, depth_m: np.ndarray, depth_scale: float | None) -> None:
     """Store float32 metres: ``.npy`` exactly, a 16-bit image as ``round(m * depth_scale)``."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     if path.suffix == ".npy":
-        with _staged(path) as tmp:
-            with open(tmp, "wb") as handle:
-                np.save(handle, np.asarray(depth_m, dtype=np.float32), allow_pickle=False)
+        buffer = io.BytesIO()  # np.save into a real file reports a full disk without errno
+        np.save(buffer, np.asarray(depth_m, dtype=np.float32), allow_pickle=False)
+        _store(path, buffer.getbuffer())
         return
     if depth_scale is None:
         raise ValueError(f"{path}: a 16-bit depth image needs a depth scale")
@@ -106,26 +103,17 @@ def _imread(path: Path, flags: int) -> np.ndarray:
 def _imwrite(path: Path, data: np.ndarray) -> None:
     """Encode to memory, then write through a temporary file and ``os.replace``."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     ok, encoded = cv2.imencode(path.suffix or ".png", data)
     if not ok:
         raise ValueError(f"{path}: OpenCV cannot encode this image type")
-    with _staged(path) as tmp:
-        encoded.tofile(tmp)
+    _store(path, encoded)
 
 
-@contextmanager
-def _staged(path: Path) -> Iterator[Path]:
-    """A unique temporary file beside ``path``, moved onto it with ``os.replace`` on success
-    (concurrent writers of the same file never share a temporary)."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(fd)
-    try:
-        yield Path(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+def _store(path: Path, data: memoryview | np.ndarray) -> None:
+    """Write ``data`` to ``path`` through a uniquely named temporary file beside it (concurrent
+    writers of one file never share it); ``WriteError`` naming ``path`` on failure."""
+    with staged_file(path) as temp, open(temp, "wb") as handle:
+        handle.write(data)
 
 
 def scaled_to_width(rgb: np.ndarray, width: int) -> np.ndarray:

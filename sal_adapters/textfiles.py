@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import os
-import tempfile
 from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
 
+from sal_adapters.atomic import staged_file
 from sal_adapters.errors import DatasetError
 
 __all__ = ["read_text", "read_rows", "read_numeric_table", "atomic_write", "atomic_write_text", "format_float"]
@@ -90,32 +90,15 @@ def format_float(value: float) -> str:
 def atomic_write(path: str | Path, write: Callable[[IO[Any]], None], binary: bool = False) -> Path:
     """Create ``path`` through a temporary file in the same folder, filled by ``write(handle)``,
     flushed to disk and moved into place with ``os.replace``: readers see the old file or the
-    whole new one, never a part. The file gets the usual permissions (0666 less the umask)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb" if binary else "w", **({} if binary else {"encoding": "utf-8", "newline": "\n"})) as handle:
-            write(handle)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.chmod(tmp, 0o666 & ~_UMASK)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    whole new one, never a part. The file gets the usual permissions (0666 less the umask); an
+    ``OSError`` raises ``WriteError`` naming ``path``."""
+    with staged_file(path) as temp, open(temp, "wb" if binary else "w", **({} if binary else {"encoding": "utf-8", "newline": "\n"})) as handle:
+        write(handle)
+        handle.flush()
+        os.fsync(handle.fileno())
+    return Path(path)
 
 
 def atomic_write_text(path: str | Path, text: str) -> Path:
     """Write ``text`` (UTF-8) to ``path`` atomically (see ``atomic_write``)."""
     return atomic_write(path, lambda handle: handle.write(text))
-
-
-def _read_umask() -> int:
-    mask = os.umask(0o022)  # read once at import (os.umask can only be read by setting it)
-    os.umask(mask)
-    return mask
-
-
-_UMASK = _read_umask()

@@ -1,0 +1,281 @@
+"""Outputs that appear whole or not at all, with the permissions the user's umask gives.
+
+Every published file or folder is built beside its final path under a hidden name in the same
+folder (so the rename stays on one file system), flushed to disk, and renamed into place once
+complete; the previous version stays until then. A folder is swapped in one step with Linux's
+``renameat2(RENAME_EXCHANGE)`` where the file system offers it, otherwise by two renames (old
+aside, new in). A run killed midway leaves only hidden siblings ``.NAME.sal-tmp-PID-HEX`` (a
+copy being built) or ``.NAME.sal-old-PID-HEX`` (an old version moved aside): the next
+replacement in that folder removes those of processes that are gone, and first puts an old
+version back when its name is empty (the run died between the two renames).
+
+New files and folders are created with modes 0666 and 0777, which the kernel reduces by the
+process umask (0644 and 0755 under umask 022; private under 077), never ``mkstemp``'s 0600.
+Any ``OSError`` while writing becomes one ``WriteError`` naming the path.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import re
+import secrets
+import shutil
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+from sal_adapters.errors import WriteError
+
+__all__ = ["Replacement", "copy_tree", "recover", "replacing_dir", "staged_file", "writing"]
+
+_LEFTOVER = re.compile(r"(?:\.(?P<name>.+))?\.sal-(?P<kind>tmp|old)-(?P<pid>\d+)-[0-9a-f]+")
+_RENAME_EXCHANGE = 2
+_AT_FDCWD = -100
+
+
+@contextmanager
+def writing(path: str | os.PathLike[str]) -> Iterator[None]:
+    """Turn an ``OSError`` raised inside the block into a ``WriteError`` naming ``path`` (one
+    already naming a path passes unchanged)."""
+    try:
+        yield
+    except WriteError:
+        raise
+    except OSError as exc:
+        raise WriteError(path, exc) from exc
+
+
+@contextmanager
+def staged_file(path: str | os.PathLike[str]) -> Iterator[Path]:
+    """A new empty file beside ``path`` for the block to fill; moved onto ``path`` with
+    ``os.replace`` when the block ends without error, removed otherwise. An ``OSError`` in
+    the block raises ``WriteError`` naming ``path``."""
+    path = Path(path)
+    with writing(path):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        temp = _hidden(path, "tmp")
+        _new_file(temp)
+        try:
+            yield temp
+            os.replace(temp, path)
+        except BaseException:
+            temp.unlink(missing_ok=True)
+            raise
+
+
+class Replacement:
+    """Outputs replaced together: each is staged beside its target, and ``commit`` renames
+    them into place (in the order they were staged) once every one is complete.
+
+    ``with Replacement() as outputs:`` commits when the block ends without error and removes
+    the staged copies otherwise, so the old outputs stay as they were.
+    """
+
+    def __init__(self) -> None:
+        self._staged: list[tuple[Path, Path, bool]] = []  # (staging, target, entries)
+
+    def __enter__(self) -> Replacement:
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None) -> None:
+        if kind is None:
+            self.commit()
+        else:
+            self.discard()
+
+    def folder(self, target: str | os.PathLike[str]) -> Path:
+        """A new empty folder to fill; it replaces the folder ``target`` at commit."""
+        target = Path(target)
+        return self._stage(target.parent, _hidden(target, "tmp"), target, entries=False)
+
+    def entries(self, directory: str | os.PathLike[str]) -> Path:
+        """A new empty folder whose top-level files and folders each replace the entry of the
+        same name in ``directory`` at commit; ``directory``'s other entries stay (a page and
+        its ``assets/`` in a folder the user chose)."""
+        directory = Path(directory)
+        return self._stage(directory, directory / f".sal-tmp-{os.getpid()}-{secrets.token_hex(4)}", directory, entries=True)
+
+    def write_text(self, target: str | os.PathLike[str], text: str) -> Path:
+        """Stage the file ``target`` holding ``text`` (UTF-8); it replaces ``target`` at commit."""
+        target = Path(target)
+        staging = self._stage(target.parent, _hidden(target, "tmp"), target, entries=False, folder=False)
+        with writing(target):
+            staging.write_text(text, encoding="utf-8", newline="\n")
+        return target
+
+    def _stage(self, parent: Path, staging: Path, target: Path, entries: bool, folder: bool = True) -> Path:
+        with writing(target):
+            parent.mkdir(parents=True, exist_ok=True)
+            recover(parent)
+            self._staged.append((staging, target, entries))
+            if folder:
+                staging.mkdir()
+            else:
+                _new_file(staging)
+        return staging
+
+    def commit(self) -> None:
+        """Flush every staged output to disk, rename each into place, then remove the old
+        versions (after an error: the staged copies not yet in place)."""
+        moves: list[tuple[Path, Path]] = []
+        for staging, target, entries in self._staged:
+            if entries:  # folders before files: a page's assets before the page
+                moves += [(child, target / child.name) for child in sorted(staging.iterdir(), key=lambda p: (p.is_file(), p.name))]
+            else:
+                moves.append((staging, target))
+        old: list[Path | None] = []
+        try:
+            for staging, target in moves:
+                with writing(target):
+                    _fsync_tree(staging)
+            for staging, target in moves:
+                with writing(target):
+                    old.append(_swap(staging, target))
+            for parent in {target.parent for _, target in moves}:
+                with writing(parent):
+                    _fsync(parent)
+        finally:
+            self.discard()  # emptied entries folders, and whatever an error left staged
+            for path in old:
+                if path is not None:
+                    _remove(path)
+
+    def discard(self) -> None:
+        """Remove every staged output; the targets stay as they are."""
+        for staging, _, _ in self._staged:
+            _remove(staging)
+        self._staged.clear()
+
+
+@contextmanager
+def replacing_dir(target: str | os.PathLike[str]) -> Iterator[Path]:
+    """``with replacing_dir(target) as folder:`` fill ``folder``; it replaces the folder
+    ``target`` when the block ends without error (see ``Replacement``)."""
+    with Replacement() as outputs:
+        yield outputs.folder(target)
+
+
+def copy_tree(source: str | os.PathLike[str], target: str | os.PathLike[str]) -> None:
+    """Copy the files and folders of ``source`` into the folder ``target`` with the modes new
+    files get (the umask's, not the source's); wrap it in ``writing(PATH)`` to name the output
+    an error is about."""
+    source, target = Path(source), Path(target)
+    for folder, _, names in os.walk(source):
+        out = target / Path(folder).relative_to(source)
+        out.mkdir(parents=True, exist_ok=True)
+        for name in names:
+            shutil.copyfile(os.path.join(folder, name), out / name)
+
+
+def recover(folder: str | os.PathLike[str]) -> None:
+    """Clean up after replacements in ``folder`` whose process was killed: put the newest old
+    version back where its name is empty, then remove the other leftovers of processes that
+    are gone (a running process's staging is left alone)."""
+    folder = Path(folder)
+    try:
+        names = os.listdir(folder)
+    except OSError:
+        return
+    found = [(match, folder / name) for name in names if (match := _LEFTOVER.fullmatch(name)) and not _alive(int(match["pid"]))]
+    found.sort(key=lambda item: _mtime(item[1]), reverse=True)
+    for match, path in found:
+        name = match["name"]
+        if match["kind"] == "old" and name is not None and not os.path.lexists(folder / name):
+            os.rename(path, folder / name)
+        else:
+            _remove(path)
+
+
+def _hidden(target: Path, kind: str) -> Path:
+    return target.with_name(f".{target.name}.sal-{kind}-{os.getpid()}-{secrets.token_hex(4)}")
+
+
+def _new_file(path: Path) -> None:
+    """Create the empty file ``path`` (it must not exist) with mode 0666 less the umask."""
+    os.close(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o666))
+
+
+def _mtime(path: Path) -> float:
+    try:
+        return path.lstat().st_mtime
+    except OSError:  # removed meanwhile by another process's recovery
+        return 0.0
+
+
+def _alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # another user's process
+        return True
+    return True
+
+
+def _swap(new: Path, target: Path) -> Path | None:
+    """Put ``new`` at ``target``; return where the old version now lies (to remove), if any."""
+    if not os.path.lexists(target) or (new.is_file() and not target.is_dir()):
+        os.replace(new, target)
+        return None
+    if _exchange(new, target):
+        return new  # the old version now has the staging name
+    old = _hidden(target, "old")
+    os.rename(target, old)
+    try:
+        os.rename(new, target)
+    except BaseException:
+        os.rename(old, target)
+        raise
+    return old
+
+
+def _load_renameat2() -> Callable[..., int] | None:
+    try:
+        function: Any = ctypes.CDLL(None, use_errno=True).renameat2
+    except (OSError, AttributeError):  # not Linux with glibc >= 2.28
+        return None
+    function.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
+    function.restype = ctypes.c_int
+    return function  # type: ignore[no-any-return]
+
+
+_RENAMEAT2 = _load_renameat2()
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap ``a`` and ``b`` in one step; False where the system or file system cannot (the
+    caller's two renames then report any real problem)."""
+    return _RENAMEAT2 is not None and _RENAMEAT2(_AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b), _RENAME_EXCHANGE) == 0
+
+
+def _fsync(path: str | os.PathLike[str]) -> None:
+    fd = os.open(path, os.O_RDONLY | os.O_CLOEXEC)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _fsync_tree(root: Path) -> None:
+    """fsync every file and folder under ``root`` (or the file ``root``); symlinks are skipped."""
+    if not root.is_dir():
+        _fsync(root)
+        return
+    for folder, _, names in os.walk(root):
+        for name in names:
+            path = os.path.join(folder, name)
+            if not os.path.islink(path):
+                _fsync(path)
+        _fsync(folder)
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        path.unlink(missing_ok=True)
