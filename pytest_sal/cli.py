@@ -1,7 +1,8 @@
 """The ``sal`` command: datasets, the synthetic world demo, and (later) the experiment workflow.
 
 Every bad input ends as one ``sal: error: ...`` line naming the file, key or option, with exit
-status 2 and no traceback.
+status 2 and no traceback; so does an output that cannot be written (``sal: error: cannot write
+PATH: No space left on device``).
 """
 
 from __future__ import annotations
@@ -127,6 +128,10 @@ def main(argv: ArgList[str] | None = None) -> int:
         except BrokenPipeError:  # the reader went away (sal modules | head): stop quietly
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
             return 0
+        except OSError as exc:  # not named by a writer (a full disk, a file where a folder belongs)
+            where = f"{exc.filename}: " if exc.filename is not None else ""
+            print(f"sal: error: {where}{exc.strerror or exc}", file=sys.stderr)
+            return 2
 
 
 def _show_warning(message: Warning | str, category: type[Warning], *_: Any, **__: Any) -> None:

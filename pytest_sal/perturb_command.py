@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import argparse
 import json
-import shutil
 import time
+from contextlib import nullcontext
 from pathlib import Path
 from typing import Any
 
@@ -23,7 +23,10 @@ from pytest_sal.experiment import (
     perturbed_sequences,
 )
 from sal_adapters import Sequence, write_sequence
+from sal_adapters.atomic import Replacement, copy_tree, writing
+from sal_adapters.cache_dir import no_cache_writes
 from sal_adapters.datasets import WRITTEN_MARKER
+from sal_adapters.textfiles import atomic_write_text
 from sal_modules import Composite, Param, Perturbation
 
 __all__ = ["add_experiment_commands", "run_perturb"]
@@ -72,10 +75,11 @@ def run_perturb(config: ExperimentConfig, *, dry_run: bool = False, cache_dir: P
     from pytest_sal.cache_keys import cache_key
 
     out = out or sys.stdout
-    clean = build_sequence(config)
-    modules = build_modules(config)
+    with no_cache_writes() if dry_run else nullcontext():  # a dry run renders in memory only
+        clean = build_sequence(config)
+        modules = build_modules(config)
+        perturbed = {name: seq for name, seq in perturbed_sequences(config, clean).items() if name in modules}  # the baseline only if listed
     seed = config.experiment.seed
-    perturbed = {name: seq for name, seq in perturbed_sequences(config, clean).items() if name in modules}  # the baseline only if listed
     root = config.output_dir()
     print(f"experiment  {config.experiment.name} (seed {seed})", file=out)
     print(f"dataset     {config.dataset.type} {clean.name}: {len(clean)} frames, {clean.sensor}, {clean.fps:.3g} Hz", file=out)
@@ -111,38 +115,39 @@ def run_perturb(config: ExperimentConfig, *, dry_run: bool = False, cache_dir: P
         "perturbations": {},
     }
     all_indices = [int(r.index) for r in clean.records]
-    for name, seq in perturbed.items():
-        module = modules[name]
-        started = time.perf_counter()
+    with Replacement() as outputs:  # the old output stays whole until every new part is complete
+        for name, seq in perturbed.items():
+            module = modules[name]
+            started = time.perf_counter()
 
-        def fill(target: Path, seq: Sequence = seq) -> None:
-            write_sequence(seq, target, progress=True)
+            def fill(target: Path, seq: Sequence = seq) -> None:
+                write_sequence(seq, target, progress=True)
 
-        folder, was_cached = cache.compute_dir(cache_key(frames=seq.fingerprint), fill)
-        target = images / name
-        if target.exists():
-            shutil.rmtree(target)
-        target.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copytree(folder, target)
-        kept = {int(r.index) for r in seq.records}
-        dropped = [i for i in all_indices if i not in kept]
-        if dropped:
-            (target / "dropped_frames.txt").write_text(
-                f"# frames of {clean.name} dropped by {name} (dataset frame indices)\n" + "".join(f"{i}\n" for i in dropped)
-            )
-        results["perturbations"][name] = {
-            "type": next(p.type for p in config.perturbations if p.name == name),
-            "module": None if module is None else module.to_dict(),
-            "frames_in": len(clean),
-            "frames_kept": len(seq),
-            "dropped_frames": dropped,
-            "seconds": round(time.perf_counter() - started, 4),
-            "cached": was_cached,
-            "output": str(target),
-        }
-    results["status"] = "completed"
-    (root / "pipeline_results.json").write_text(json.dumps(results, indent=2) + "\n")
-    (root / "config.yaml").write_text(config.text)
+            folder, was_cached = cache.compute_dir(cache_key(frames=seq.fingerprint), fill)
+            target = images / name
+            staging = outputs.folder(target)
+            with writing(target):
+                copy_tree(folder, staging)
+            kept = {int(r.index) for r in seq.records}
+            dropped = [i for i in all_indices if i not in kept]
+            if dropped:
+                atomic_write_text(
+                    staging / "dropped_frames.txt",
+                    f"# frames of {clean.name} dropped by {name} (dataset frame indices)\n" + "".join(f"{i}\n" for i in dropped),
+                )
+            results["perturbations"][name] = {
+                "type": next(p.type for p in config.perturbations if p.name == name),
+                "module": None if module is None else module.to_dict(),
+                "frames_in": len(clean),
+                "frames_kept": len(seq),
+                "dropped_frames": dropped,
+                "seconds": round(time.perf_counter() - started, 4),
+                "cached": was_cached,
+                "output": str(target),
+            }
+        results["status"] = "completed"
+        outputs.write_text(root / "pipeline_results.json", json.dumps(results, indent=2) + "\n")
+        outputs.write_text(root / "config.yaml", config.text)
 
     labels = {
         name: "none" if module is None else (module.label() if isinstance(module, Composite) else module.name)

@@ -4,7 +4,8 @@ Opening renders nothing: each frame's image, right image and depth sources load 
 from the cache folder or render the frame, writing every file that rendering produced
 (left view: image and depth; right view: image). Files are written through uniquely named
 temporary files and ``os.replace``, so processes rendering the same frame at the same time
-only ever see complete files.
+only ever see complete files. Opened inside ``no_cache_writes()`` (``sal perturb --dry-run``),
+a sequence reads what the folder holds and renders the rest in memory, storing nothing.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sal_adapters.cache_dir import user_cache_dir
+from sal_adapters.cache_dir import cache_writes_allowed, user_cache_dir
 from sal_adapters.errors import DatasetError
 from sal_adapters.images import read_depth, read_image, write_depth, write_image
 from sal_adapters.sequence import FrameRecord, Sequence
@@ -47,11 +48,13 @@ def frame_stem(index: int) -> str:
 
 
 class FrameStore:
-    """Frames of ``world`` in ``folder``: read when present, rendered and stored otherwise."""
+    """Frames of ``world`` in ``folder``: read when present, rendered otherwise (and stored
+    there unless ``store`` is false)."""
 
-    def __init__(self, world: World, folder: Path):
+    def __init__(self, world: World, folder: Path, store: bool = True):
         self.world = world
         self.folder = Path(folder)
+        self.store = store
 
     def _path(self, stream: str, index: int) -> Path:
         return self.folder / stream / f"{frame_stem(index)}{'.npy' if stream == DEPTH else '.png'}"
@@ -72,14 +75,16 @@ class FrameStore:
         if path.is_file():
             return read_image(path)
         rgb, _ = self.world.render(index, right=True)
-        write_image(path, rgb)
+        if self.store:
+            write_image(path, rgb)
         return rgb
 
     def _render_left(self, index: int) -> tuple[np.ndarray, np.ndarray]:
         """Render the left view and store both of its files."""
         rgb, depth = self.world.render(index)
-        write_image(self._path(LEFT, index), rgb)
-        write_depth(self._path(DEPTH, index), depth, None)
+        if self.store:
+            write_image(self._path(LEFT, index), rgb)
+            write_depth(self._path(DEPTH, index), depth, None)
         return rgb, depth
 
 
@@ -87,13 +92,15 @@ def rendered_sequence(world: World, folder: Path, frames: int, sensor: str) -> S
     """The first ``frames`` frames of ``world`` as ``sensor``, rendered on demand into ``folder``.
 
     The folder's metadata (a synthetic layout with ``cache: true``) is written or extended
-    to at least ``frames`` frames; a folder holding another world raises ``DatasetError``.
+    to at least ``frames`` frames (not inside ``no_cache_writes()``: nothing is stored then);
+    a folder holding another world raises ``DatasetError``.
     """
     folder = Path(folder)
     if folder.exists() and not folder.is_dir():
         raise DatasetError("synthetic cache_dir is not a folder", folder)
     groundtruth = world.groundtruth(np.arange(frames))
-    if _cached_frames(world, folder) < frames:
+    store = cache_writes_allowed()
+    if _cached_frames(world, folder) < frames and store:
         folder.mkdir(parents=True, exist_ok=True)
         info = {
             "kind": "synthetic",
@@ -110,15 +117,15 @@ def rendered_sequence(world: World, folder: Path, frames: int, sensor: str) -> S
         }
         rows = [FrameRow(frame_stem(i), i, i / world.fps) for i in range(frames)]
         write_metadata(folder, info, rows, groundtruth)
-    store = FrameStore(world, folder)
+    frame_store = FrameStore(world, folder, store)
     records = [
         FrameRecord(
             index=i,
             timestamp=i / world.fps,
             stem=frame_stem(i),
-            image=partial(store.left, i),
-            right=partial(store.right, i) if sensor == "stereo" else None,
-            depth=partial(store.depth, i),
+            image=partial(frame_store.left, i),
+            right=partial(frame_store.right, i) if sensor == "stereo" else None,
+            depth=partial(frame_store.depth, i),
         )
         for i in range(frames)
     ]

@@ -17,7 +17,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from sal_adapters.cache_dir import user_cache_dir
+from sal_adapters.cache_dir import cache_writes_allowed, user_cache_dir
 from sal_adapters.images import read_depth, write_depth
 from sal_adapters.sequence import Sequence
 from sal_modules.base import DepthLookup
@@ -70,7 +70,8 @@ class CachedDepth:
     """Depth by dataset index and stream: memory (a few frames) -> disk -> ``compute``.
 
     Disk entries live in ``<cache>/depth/<key>/<index>_<stream>.npy`` and are written
-    atomically, so concurrent processes computing the same frame never see a partial file.
+    atomically, so concurrent processes computing the same frame never see a partial file;
+    none is written when the lookup was made inside ``no_cache_writes()``.
     """
 
     def __init__(self, provider: DepthProvider, sequence: Sequence, cache_dir: Path | None = None, keep: int = 4):
@@ -81,6 +82,7 @@ class CachedDepth:
         self._recent: OrderedDict[tuple[int, str], np.ndarray] = OrderedDict()
         self._keep = keep
         self._lock = Lock()
+        self._store = cache_writes_allowed()
 
     def __call__(self, index: int, stream: str) -> np.ndarray:
         key = (index, stream)
@@ -103,7 +105,8 @@ class CachedDepth:
         if path.is_file():
             return read_depth(path, None)
         depth = np.ascontiguousarray(self.provider.compute(self.sequence, position, stream), dtype=np.float32)
-        write_depth(path, depth, None)
+        if self._store:
+            write_depth(path, depth, None)
         return depth
 
 

@@ -1,0 +1,338 @@
+"""Outputs are replaced whole or not at all, with the umask's permissions, and a write that
+fails names its path (issue 12, points 2, 3, 6 and 7), on ``sal perturb`` over a small
+synthetic experiment and on the helper ``sal_adapters.atomic`` itself:
+
+* ``sal perturb --dry-run`` leaves the caches, the output folder and HOME as they were;
+* ``kill -9`` of a ``sal perturb`` rerun at 0.3 s, 1 s, 2 s, when its first staging folder
+  appears and just before it renames: the previous output is intact, byte for byte; the next
+  run cleans the leftovers;
+* a full disk or a file where a folder belongs: one ``sal: error: cannot write PATH: ...``;
+* files 0644 and folders 0755 under umask 022, private under 077;
+* ``write_sequence`` into a symlink loop: one error naming the path.
+"""
+
+from __future__ import annotations
+
+import errno
+import hashlib
+import os
+import shutil
+import signal
+import stat
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+
+from pytest_sal.cli import main
+from sal_adapters import SalError, open_dataset, write_sequence
+from sal_adapters import atomic
+from sal_adapters.atomic import Replacement, recover, replacing_dir
+from sal_adapters.errors import WriteError
+from sal_adapters.textfiles import atomic_write_text
+
+NAME = "outputs"
+LEFTOVER = (".sal-tmp-", ".sal-old-")
+
+CONFIG = """\
+experiment: {{name: {name}, seed: 3}}
+dataset:
+  type: synthetic
+  options: {{scene: urban, frames: {frames}, sensor: mono}}
+perturbations:
+  - {{name: fog, type: fog, parameters: {{visibility_m: {visibility}}}}}
+  - {{name: rain, type: rain, parameters: {{intensity_mm_h: 40}}}}
+  - {{name: drop, type: frame_drop, parameters: {{drop_rate: 0.3}}}}
+output: {{base_dir: {base_dir}}}
+"""
+
+
+def write_config(folder: Path, *, visibility: float = 60, frames: int = 8, base_dir: str = "results") -> Path:
+    path = folder / f"{NAME}-{visibility:g}.yaml"
+    path.write_text(CONFIG.format(name=NAME, frames=frames, visibility=visibility, base_dir=base_dir))
+    return path
+
+
+def snapshot(root: Path) -> dict[str, str]:
+    """Every visible file and folder under ``root``: relative path -> SHA-256 (``dir`` for
+    folders); staging and old copies left by a killed run are not part of the output."""
+    found = {}
+    for path in sorted(root.rglob("*")):
+        rel = path.relative_to(root).as_posix()
+        if any(mark in rel for mark in LEFTOVER):
+            continue
+        found[rel] = "dir" if path.is_dir() else hashlib.sha256(path.read_bytes()).hexdigest()
+    return found
+
+
+def leftovers(root: Path) -> list[str]:
+    return [p.relative_to(root).as_posix() for p in root.rglob("*") if any(mark in p.name for mark in LEFTOVER)]
+
+
+def sal(*args: str | Path, cwd: Path, **kwargs: object) -> subprocess.Popen[bytes]:
+    """``sal ARGS`` in a child process (the environment of this session: its isolated caches)."""
+    return subprocess.Popen([sys.executable, "-m", "pytest_sal.cli", *map(str, args)], cwd=cwd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, **kwargs)  # type: ignore[call-overload]
+
+
+def finished(process: subprocess.Popen[bytes]) -> None:
+    _, err = process.communicate(timeout=300)
+    assert process.returncode == 0, err.decode()
+
+
+# ---------------------------------------------------------------------------------------- dry run
+
+
+def test_dry_run_touches_nothing_on_disk(tmp_path: Path) -> None:
+    home = tmp_path / "home"
+    env = {**os.environ, "HOME": str(home), "XDG_CACHE_HOME": str(home / ".cache"), "XDG_CONFIG_HOME": str(home / ".config")}
+    env["SAL_CACHE_DIR"] = str(home / "sal-cache")
+    work = tmp_path / "work"
+    work.mkdir()
+    config = write_config(work)
+    # matplotlib (which the sal command imports) builds its font list once per user: not ours
+    subprocess.run([sys.executable, "-c", "import matplotlib.figure"], env=env, check=True)
+    before = snapshot(tmp_path)
+
+    out = subprocess.run([sys.executable, "-m", "pytest_sal.cli", "perturb", str(config), "--dry-run", "--cache-dir", str(tmp_path / "trials")],
+                         cwd=work, env=env, capture_output=True, text=True, timeout=300)
+
+    assert out.returncode == 0, out.stderr
+    assert "dry run: nothing written" in out.stdout
+    assert "synthetic" in out.stdout and "8 frames" in out.stdout  # the dataset was resolved
+    assert snapshot(tmp_path) == before
+    assert leftovers(tmp_path) == []
+
+
+# ------------------------------------------------------------------------------- kill -9 of a rerun
+
+
+def _kill_after(seconds: float) -> Callable[[Path], None]:
+    def wait(root: Path) -> None:
+        time.sleep(seconds)
+
+    return wait
+
+
+def _kill_when_staging(root: Path) -> None:
+    deadline = time.monotonic() + 120
+    while not list((root / "images").glob(".*.sal-tmp-*")):
+        assert time.monotonic() < deadline, "no staging folder appeared"
+        time.sleep(0.005)
+
+
+#: the child pauses when its last output is staged, just before the renames
+PAUSE_BEFORE_COMMIT = """
+import sys, time
+from pathlib import Path
+from sal_adapters.atomic import Replacement
+from pytest_sal.cli import main
+
+def paused(self, target, text, write_text=Replacement.write_text):
+    staged = write_text(self, target, text)
+    if Path(target).name == "config.yaml":
+        Path(sys.argv[1]).touch()
+        time.sleep(300)
+    return staged
+
+Replacement.write_text = paused
+sys.exit(main(sys.argv[2:]))
+"""
+
+
+@pytest.fixture
+def children() -> Iterator[list[subprocess.Popen[bytes]]]:
+    """Child processes a test starts; any still running at its end are killed."""
+    started: list[subprocess.Popen[bytes]] = []
+    yield started
+    for process in started:
+        if process.poll() is None:
+            process.kill()
+        process.communicate()
+
+
+def test_kill_9_of_a_rerun_keeps_the_previous_output(tmp_path: Path, children: list[subprocess.Popen[bytes]]) -> None:
+    old_config, new_config = (write_config(tmp_path, visibility=v, frames=24) for v in (60, 25))  # a rerun: ~5 s
+    root = tmp_path / "results" / NAME
+    finished(sal("perturb", old_config, "--cache-dir", tmp_path / "trials-old", cwd=tmp_path))
+    before = snapshot(root)
+    assert {"pipeline_results.json", "config.yaml", "images/fog/sal_sequence.json", "images/drop/dropped_frames.txt"} <= set(before)
+
+    moments = {"0.3 s": _kill_after(0.3), "1 s": _kill_after(1.0), "2 s": _kill_after(2.0), "staging appears": _kill_when_staging}
+    for k, (moment, wait) in enumerate(moments.items()):
+        process = sal("perturb", new_config, "--cache-dir", tmp_path / f"trials-{k}", cwd=tmp_path)  # nothing cached: seconds of work
+        children.append(process)
+        wait(root)
+        assert process.poll() is None, f"the rerun ended before the kill at {moment}"
+        process.send_signal(signal.SIGKILL)
+        process.wait()
+        assert snapshot(root) == before, f"kill -9 at {moment} changed the previous output"
+
+    flag = tmp_path / "staged"
+    process = subprocess.Popen([sys.executable, "-c", PAUSE_BEFORE_COMMIT, str(flag), "perturb", str(new_config), "--cache-dir", str(tmp_path / "trials-old")],
+                               cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    children.append(process)
+    deadline = time.monotonic() + 120
+    while not flag.exists():
+        assert process.poll() is None and time.monotonic() < deadline, "the child ended or never staged its outputs"
+        time.sleep(0.01)
+    assert len(leftovers(root)) == 5  # three sequences and two files, staged complete
+    process.send_signal(signal.SIGKILL)
+    process.wait()
+    assert snapshot(root) == before, "kill -9 just before the renames changed the previous output"
+
+    finished(sal("perturb", new_config, "--cache-dir", tmp_path / "trials-old", cwd=tmp_path))
+    after = snapshot(root)
+    assert leftovers(root) == []  # the killed runs' staging folders are gone
+    assert set(after) == set(before) and after["images/rain/sal_sequence.json"] == before["images/rain/sal_sequence.json"]
+    assert after["images/fog/image_left/000000.png"] != before["images/fog/image_left/000000.png"]  # the new fog
+    assert "visibility_m: 25" in (root / "config.yaml").read_text()
+
+
+# ------------------------------------------------------------------------ disk full, no folder
+
+
+def test_disk_full_is_one_line_naming_the_path_and_keeps_the_output(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    config = write_config(tmp_path, frames=4)
+    monkeypatch.chdir(tmp_path)
+    assert main(["perturb", str(config)]) == 0
+    root = tmp_path / "results" / NAME
+    before = snapshot(root)
+    capsys.readouterr()
+
+    def full_disk(source: str, target: str | Path) -> None:
+        with open(target, "wb") as handle:
+            handle.write(b"\x89PNG part")
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))  # what write(2) raises: no path
+
+    monkeypatch.setattr(shutil, "copyfile", full_disk)
+    assert main(["perturb", str(config)]) == 2
+
+    err = capsys.readouterr().err
+    assert err == f"sal: error: cannot write {Path('results') / NAME / 'images' / 'fog'}: No space left on device\n"
+    assert snapshot(root) == before
+    assert leftovers(root) == []
+
+
+def test_a_file_where_the_output_folder_belongs_is_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "taken").write_text("a file, not a folder\n")
+    config = write_config(tmp_path, frames=4, base_dir="taken/results")
+    monkeypatch.chdir(tmp_path)
+
+    assert main(["perturb", str(config)]) == 2
+
+    err = capsys.readouterr().err
+    assert err == f"sal: error: cannot write {Path('taken/results') / NAME / 'images' / 'fog'}: Not a directory\n"
+
+
+def test_atomic_write_on_a_full_disk_names_the_file_and_keeps_the_old_one(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    path = atomic_write_text(tmp_path / "history" / "run.json", "old\n")
+    monkeypatch.setattr(os, "fsync", lambda fd: (_ for _ in ()).throw(OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))))
+
+    with pytest.raises(WriteError) as caught:
+        atomic_write_text(path, "new\n")
+
+    assert str(caught.value) == f"cannot write {path}: No space left on device"
+    assert caught.value.errno == errno.ENOSPC and isinstance(caught.value, SalError)
+    assert path.read_text() == "old\n" and os.listdir(path.parent) == ["run.json"]
+
+
+def test_write_sequence_into_a_symlink_loop_names_the_path(tmp_path: Path) -> None:
+    (tmp_path / "a").symlink_to(tmp_path / "b")
+    (tmp_path / "b").symlink_to(tmp_path / "a")
+    sequence = open_dataset("synthetic", scene="urban", frames=1, sensor="mono")
+    target = tmp_path / "a" / "out"
+
+    with pytest.raises(SalError) as caught:
+        write_sequence(sequence, target)
+
+    message = str(caught.value)
+    assert str(target) in message and ("symlink loop" in message or "symbolic links" in message)
+    assert "\n" not in message
+
+
+# ------------------------------------------------------------------------------------ file modes
+
+
+@pytest.mark.parametrize(("umask", "file_mode", "dir_mode"), [(0o022, 0o644, 0o755), (0o077, 0o600, 0o700)])
+def test_outputs_and_caches_get_the_umask_permissions(tmp_path: Path, umask: int, file_mode: int, dir_mode: int) -> None:
+    config = write_config(tmp_path, frames=3)
+    env = {**os.environ, "SAL_CACHE_DIR": str(tmp_path / "renders")}  # rendered under this umask
+    trials = tmp_path / "trials"
+    process = sal("perturb", config, "--cache-dir", trials, cwd=tmp_path, env=env, umask=umask)
+    finished(process)
+
+    entries = [marker.parent for marker in trials.rglob("sal_sequence.json")]
+    assert entries, "no cached sequence"
+    checked = 0
+    for top in [tmp_path / "results", tmp_path / "renders", *entries]:
+        for path in [top, *top.rglob("*")]:
+            mode = stat.S_IMODE(path.stat().st_mode)
+            assert mode == (dir_mode if path.is_dir() else file_mode), f"{path}: {mode:o}"
+            checked += 1
+    assert checked > 50
+
+
+# -------------------------------------------------------------------------------- the helper
+
+
+def test_a_failed_replacement_keeps_the_old_folder_and_leaves_nothing(tmp_path: Path) -> None:
+    target = tmp_path / "out"
+    (target / "sub").mkdir(parents=True)
+    (target / "sub" / "old.txt").write_text("old")
+
+    with pytest.raises(RuntimeError), replacing_dir(target) as staging:
+        (staging / "new.txt").write_text("half")
+        raise RuntimeError("the run failed")
+
+    assert (target / "sub" / "old.txt").read_text() == "old" and not (target / "new.txt").exists()
+    assert os.listdir(tmp_path) == ["out"]
+
+
+@pytest.mark.parametrize("exchange", [True, False], ids=["renameat2", "two-renames"])
+def test_replacement_swaps_folders_and_files_together(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, exchange: bool) -> None:
+    if not exchange:
+        monkeypatch.setattr(atomic, "_exchange", lambda a, b: False)
+    page = tmp_path / "page"
+    (page / "assets").mkdir(parents=True)
+    (page / "assets" / "old.png").write_bytes(b"old")
+    (page / "index.html").write_text("old page")
+    (page / "notes.txt").write_text("the user's")
+
+    with Replacement() as outputs:
+        staged = outputs.entries(page)
+        (staged / "assets").mkdir()
+        (staged / "assets" / "new.png").write_bytes(b"new")
+        (staged / "index.html").write_text("new page")
+        folder = outputs.folder(tmp_path / "data")
+        (folder / "x").write_text("x")
+        outputs.write_text(tmp_path / "results.json", "{}\n")
+
+    assert sorted(os.listdir(page)) == ["assets", "index.html", "notes.txt"]
+    assert os.listdir(page / "assets") == ["new.png"] and (page / "index.html").read_text() == "new page"
+    assert (tmp_path / "data" / "x").read_text() == "x" and (tmp_path / "results.json").read_text() == "{}\n"
+    assert leftovers(tmp_path) == []
+
+
+def _dead_pid() -> int:
+    child = subprocess.Popen([sys.executable, "-c", "pass"])
+    child.wait()
+    return child.pid
+
+
+def test_recover_puts_back_an_old_version_and_removes_dead_leftovers(tmp_path: Path) -> None:
+    dead = _dead_pid()
+    old = tmp_path / f".out.sal-old-{dead}-00ff"  # killed between the two renames
+    old.mkdir()
+    (old / "kept.txt").write_text("previous")
+    (tmp_path / f".out.sal-tmp-{dead}-0a0b").mkdir()  # its complete new copy, never moved in
+    (tmp_path / f".other.sal-tmp-{dead}-0c0d").write_text("half")
+    running = tmp_path / f".out.sal-tmp-{os.getpid()}-0e0f"  # a replacement in progress
+    running.mkdir()
+
+    recover(tmp_path)
+
+    assert (tmp_path / "out" / "kept.txt").read_text() == "previous"
+    assert sorted(os.listdir(tmp_path)) == sorted(["out", running.name])
