@@ -13,6 +13,9 @@ Under ``<output_dir>/slam_results/<algo>/``::
     trajectory_plots/comparison/run_<k>/trajectory_comparison_error.png translation error over time
     work/run_<k>/<name>/                                             the system's own files and logs
 
+The tree is built beside the previous one (``sal_adapters.atomic``) and swapped in once every
+run is scored: an interrupted evaluation leaves the previous results whole.
+
 Unlike the reference implementation, the baseline is run once per run number and reused for
 every perturbation; a failed run (baseline included) is recorded with its reason and never
 aborts the rest. ``SalError`` from a system (bad use: an unsupported sensor) still stops.
@@ -36,6 +39,7 @@ import numpy as np
 
 from pytest_sal.cli_types import add_cache_arguments, add_slam_arguments
 from pytest_sal.experiment import BASELINE
+from sal_adapters.atomic import Replacement
 from sal_adapters.errors import SalError
 from sal_adapters.textfiles import atomic_write
 from sal_adapters.trajectory import Trajectory
@@ -112,40 +116,42 @@ def run_evaluate(
     if use_cache:
         cache = command_cache(cache_dir)
         sequences = {name: seq if seq is clean else cached_sequence(seq, cache, progress=True) for name, seq in sequences.items()}
-    root = config.output_dir() / "slam_results" / slam
-    metrics_dir = root / "metrics"
     if groundtruth is None:
         out(f"warning: {clean.name} has no ground truth: only tracking rates are scored")
 
-    all_metrics: dict[str, list[Any]] = {name: [] for name in sequences}
-    for k in range(1, runs + 1):
-        run_metrics: dict[str, Any] = {}
-        for name, sequence in sequences.items():
-            workdir = root / "work" / f"run_{k}" / name
-            workdir.mkdir(parents=True, exist_ok=True)
-            start = time.perf_counter()
-            result = _run_system(system, sequence, workdir, timeout)
-            seconds = time.perf_counter() - start
-            metrics = _score(result, groundtruth)
-            run_metrics[name] = metrics
-            all_metrics[name].append(metrics)
-            if result.trajectory is not None and len(result.trajectory):
-                path = root / "trajectories" / f"run_{k}" / f"{name}.txt"
-                path.parent.mkdir(parents=True, exist_ok=True)
-                result.trajectory.write_tum(path)
-            _write_json(metrics_dir / f"run_{k}" / name / "ate.json", _ate_record(metrics, result, k, seconds))
-            if name != BASELINE:
-                vs = _vs_baseline(metrics, run_metrics[BASELINE], result, baseline_traj=_baseline_trajectory(root, k), groundtruth=groundtruth)
-                _write_json(metrics_dir / f"run_{k}" / name / "vs_baseline.json", vs)
-            out(_progress(name, k, runs, metrics, seconds))
-        _run_plots(root, k, run_metrics, groundtruth, out)
+    final = config.output_dir() / "slam_results" / slam
+    with Replacement() as outputs:  # the previous results stay whole until every run is scored
+        root = outputs.folder(final)
+        metrics_dir = root / "metrics"
+        all_metrics: dict[str, list[Any]] = {name: [] for name in sequences}
+        for k in range(1, runs + 1):
+            run_metrics: dict[str, Any] = {}
+            for name, sequence in sequences.items():
+                workdir = root / "work" / f"run_{k}" / name
+                workdir.mkdir(parents=True, exist_ok=True)
+                start = time.perf_counter()
+                result = _run_system(system, sequence, workdir, timeout)
+                seconds = time.perf_counter() - start
+                metrics = _score(result, groundtruth)
+                run_metrics[name] = metrics
+                all_metrics[name].append(metrics)
+                if result.trajectory is not None and len(result.trajectory):
+                    path = root / "trajectories" / f"run_{k}" / f"{name}.txt"
+                    path.parent.mkdir(parents=True, exist_ok=True)
+                    result.trajectory.write_tum(path)
+                _write_json(metrics_dir / f"run_{k}" / name / "ate.json", _ate_record(metrics, result, k, seconds))
+                if name != BASELINE:
+                    vs = _vs_baseline(metrics, run_metrics[BASELINE], result, baseline_traj=_baseline_trajectory(root, k), groundtruth=groundtruth)
+                    _write_json(metrics_dir / f"run_{k}" / name / "vs_baseline.json", vs)
+                out(_progress(name, k, runs, metrics, seconds))
+            _run_plots(root, k, run_metrics, groundtruth, out)
 
-    summary = _summary(all_metrics, slam, system, config, clean, runs)
-    _write_json(metrics_dir / "summary.json", summary)
-    _try_plot(lambda: _aggregated_plot(summary, metrics_dir / "aggregated_metrics.png"), out)
+        summary = _summary(all_metrics, slam, system, config, clean, runs)
+        _write_json(metrics_dir / "summary.json", summary)
+        _try_plot(lambda: _aggregated_plot(summary, metrics_dir / "aggregated_metrics.png"), out)
     out(_table(summary))
-    out(f"wrote {root}")
-    return {**summary, "root": str(root)}
+    out(f"wrote {final}")
+    return {**summary, "root": str(final)}
 
 
 # -- running and scoring ---------------------------------------------------------------------------

@@ -20,16 +20,16 @@ A part that is missing is named with the command that makes it; a part that cann
 from __future__ import annotations
 
 import json
-import shutil
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from pytest_sal.report_html import REPORT_CSS, asset_src, esc, html_page
+from pytest_sal.report_html import REPORT_CSS, asset_src, esc, html_page, page_folder
 from pytest_sal.requirements import METRICS
 from sal_adapters import SalError, Sequence, open_dataset
+from sal_adapters.atomic import copy_file
 from sal_adapters.datasets import WRITTEN_MARKER
 from sal_adapters.images import scaled_to_width, write_image
 from sal_adapters.textfiles import atomic_write_text
@@ -69,7 +69,8 @@ class _Page:
         """The readable JSON files matching ``pattern`` under ``folder/part``, sorted by path;
         ``None`` when there is none at all (that command was not run)."""
         root = self.folder / part
-        paths = sorted(root.glob(pattern)) if root.is_dir() else []
+        found = root.glob(pattern) if root.is_dir() else []  # not in hidden folders: outputs being replaced
+        paths = sorted(p for p in found if not any(part.startswith(".") for part in p.relative_to(root).parts))
         if not paths:
             return None
         return [(path, data) for path in paths if (data := self.json(path)) is not None]
@@ -84,8 +85,7 @@ class _Page:
         if not source.is_file():
             return f"<p class='dim'>missing: {esc(self.rel(source))}</p>"
         target = self.out_dir / "assets" / name
-        target.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(source, target)
+        copy_file(source, target)
         return f"<img class='{css}' src='{asset_src(target, self.out_dir)}' alt='{esc(alt)}' loading='lazy'>"
 
     def rel(self, path: Path) -> str:
@@ -118,9 +118,13 @@ def write_experiment_report(folder: str | Path, out_dir: str | Path | None = Non
     out_dir = Path(out_dir).expanduser() if out_dir is not None else folder / "report"
     if out_dir.exists() and not out_dir.is_dir():
         raise SalError(f"report folder {out_dir} is a file; give a folder for index.html and assets/")
-    assets = out_dir / "assets"
-    if assets.exists():
-        shutil.rmtree(assets)  # pictures of an earlier report of a different run
+    with page_folder(out_dir) as staging:
+        _write_report(folder, staging, warn)
+    return out_dir / "index.html"
+
+
+def _write_report(folder: Path, out_dir: Path, warn: Callable[[str], None]) -> None:
+    """Write ``index.html`` and ``assets/`` of the experiment ``folder`` into ``out_dir``."""
     page = _Page(folder, out_dir, warn)
     pipeline = page.json(folder / "pipeline_results.json") if (folder / "pipeline_results.json").is_file() else None
     sections = [
@@ -140,7 +144,7 @@ def write_experiment_report(folder: str | Path, out_dir: str | Path | None = Non
         problems=f"<section class='problems'><h2>Left out</h2><ul>{problems}</ul></section>" if problems else "",
         sections="\n".join(sections),
     ))
-    return atomic_write_text(out_dir / "index.html", text)
+    atomic_write_text(out_dir / "index.html", text)
 
 
 def _results_folder(config_path: Path) -> Path:
@@ -165,7 +169,7 @@ def _frames_section(page: _Page, pipeline: dict[str, Any] | None) -> str:
     if not images.is_dir():
         return f"<section>{heading}<p class='dim'>no perturbed sequences: run <code>sal perturb CONFIG</code></p></section>"
     recorded = (pipeline or {}).get("perturbations") or {}
-    names = [n for n in recorded if (images / n).is_dir()] + sorted(p.name for p in images.iterdir() if p.is_dir() and p.name not in recorded)
+    names = [n for n in recorded if (images / n).is_dir()] + sorted(p.name for p in images.iterdir() if p.is_dir() and p.name not in recorded and not p.name.startswith("."))
     sequences: dict[str, Sequence] = {}
     clean = _clean_sequence(page)
     if clean is not None:
@@ -246,7 +250,7 @@ def _module_text(module: dict[str, Any] | None) -> str:
 def _slam_section(page: _Page) -> str:
     root = page.folder / "slam_results"
     heading = "<h2>SLAM results</h2>"
-    systems = sorted(p for p in root.iterdir() if p.is_dir()) if root.is_dir() else []
+    systems = sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith(".")) if root.is_dir() else []
     if not systems:
         return f"<section>{heading}<p class='dim'>no SLAM runs: run <code>sal evaluate CONFIG --slam NAME</code></p></section>"
     parts = [heading]

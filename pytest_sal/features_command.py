@@ -6,6 +6,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from sal_adapters.atomic import Replacement
+
 __all__ = ["add_features_commands", "run_features"]
 
 EPILOG = """\
@@ -14,7 +16,8 @@ examples:
   sal features exp.yaml --features orb,superpoint --superpoint-model superpoint.onnx --max-frames 50
 
 Writes <base_dir>/<name>/features/<FEATURE>/summary.json (detections and matches per frame,
-mean track length, survival curve per sequence), track_survival.png and detections.png.
+mean track length, survival curve per sequence), track_survival.png and detections.png; each
+<FEATURE> folder is replaced whole once complete.
 """
 
 
@@ -46,7 +49,11 @@ def run_features(config_path: Path, features: str, *, model: Path | None = None,
     extractors = parse_features(features, model=model, max_keypoints=max_keypoints)
     sequences = perturbed_sequences(config, build_sequence(config))
     out_dir = config.output_dir() / "features"
-    results = compare_features(sequences, extractors, out_dir, max_frames=max_frames, progress=True)
+    with Replacement() as outputs:  # each feature type's folder is replaced whole, the others stay
+        staging = outputs.entries(out_dir)
+        results = compare_features(sequences, extractors, staging, max_frames=max_frames, progress=True)
+        for result in results.values():
+            result.update({key: outputs.final(result[key]) for key in ("summary", "track_survival", "detections")})
     for feature, result in results.items():
         print(f"{feature}:")
         for name, stats in result["stats"].items():

@@ -12,8 +12,8 @@ import hashlib
 import html
 import math
 import re
-import shutil
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from urllib.parse import quote
 
@@ -43,9 +43,10 @@ from pytest_sal.report import (
     with_unit,
 )
 from pytest_sal.requirements import METRICS
+from sal_adapters.atomic import Replacement, copy_file
 from sal_adapters.textfiles import atomic_write_text
 
-__all__ = ["REPORT_CSS", "asset_src", "esc", "html_page", "metric_figure", "metric_plot", "write_html_report"]
+__all__ = ["REPORT_CSS", "asset_src", "esc", "html_page", "metric_figure", "metric_plot", "page_folder", "write_html_report"]
 
 PASS_COLOUR = "#2ca02c"
 FAIL_COLOUR = "#d62728"
@@ -200,11 +201,27 @@ def _unit_suffix(name: str) -> str:
 # ---------------------------------------------------------------- page
 
 
+@contextmanager
+def page_folder(directory: Path) -> Iterator[Path]:
+    """``with page_folder(directory) as folder:`` write ``index.html`` and ``assets/`` into
+    ``folder`` (a staging folder, ``assets/`` already made); when the block ends without error
+    both replace those in ``directory`` together, even an empty ``assets/`` (an earlier page's
+    pictures go); the other files in ``directory`` stay."""
+    with Replacement() as outputs:
+        folder = outputs.entries(directory)
+        (folder / "assets").mkdir()
+        yield folder
+
+
 def write_html_report(outcomes: Iterable[Outcome], directory: str | Path, *, title: str = "Robustness report") -> Path:
-    """Write ``index.html`` and ``assets/`` into ``directory``; return the page's path."""
-    outcomes = list(outcomes)
-    directory = Path(directory)
-    directory.mkdir(parents=True, exist_ok=True)
+    """Write ``index.html`` and ``assets/`` into ``directory`` (replacing both together);
+    return the page's path."""
+    with page_folder(Path(directory)) as folder:
+        _write_page(list(outcomes), folder, title)
+    return Path(directory) / "index.html"
+
+
+def _write_page(outcomes: list[Outcome], directory: Path, title: str) -> None:
     slugs = _slugs(outcomes)
     sections = [_section(o, slug, directory) for o, slug in zip(outcomes, slugs)]
     rows = summary_rows(outcomes)
@@ -230,7 +247,7 @@ def write_html_report(outcomes: Iterable[Outcome], directory: str | Path, *, tit
         rows="\n".join(body),
         sections="\n".join(sections),
     ))
-    return atomic_write_text(directory / "index.html", page)
+    atomic_write_text(directory / "index.html", page)
 
 
 def _section(o: Outcome, slug: str, directory: Path) -> str:
@@ -309,9 +326,7 @@ def _artifact_figures(o: Outcome, kind: str, assets: Path, directory: Path) -> l
             figures.append(f"<figure class='{cls} missing'><div class='none'>missing: {esc(src.name)}</div><figcaption>{esc(caption)}</figcaption></figure>")
             continue
         target = assets / f"{kind}-{index + 1:02d}{src.suffix.lower() or '.png'}"
-        target.parent.mkdir(parents=True, exist_ok=True)
-        if src.resolve() != target.resolve():
-            shutil.copyfile(src, target)
+        copy_file(src, target)
         rel = asset_src(target, directory)
         figures.append(
             f"<figure class='{cls}'><a href='{rel}'><img src='{rel}' alt='{esc(kind)} at {esc(caption)}' loading='lazy'></a>"

@@ -29,7 +29,7 @@ from typing import Any
 
 from sal_adapters.errors import WriteError
 
-__all__ = ["Replacement", "copy_tree", "recover", "replacing_dir", "staged_file", "writing"]
+__all__ = ["Replacement", "copy_file", "copy_tree", "recover", "replacing_dir", "staged_file", "writing"]
 
 _LEFTOVER = re.compile(r"(?:\.(?P<name>.+))?\.sal-(?P<kind>tmp|old)-(?P<pid>\d+)-[0-9a-f]+")
 _RENAME_EXCHANGE = 2
@@ -83,8 +83,19 @@ class Replacement:
     def __exit__(self, kind: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None) -> None:
         if kind is None:
             self.commit()
-        else:
-            self.discard()
+            return
+        if isinstance(exc, WriteError) and exc.filename is not None:
+            exc.filename = str(self.final(exc.filename))  # name the output, not its staging copy
+        self.discard()
+
+    def final(self, path: str | os.PathLike[str]) -> Path:
+        """Where ``path``, inside a staged output, will be after the commit (other paths as
+        they are)."""
+        path = Path(path)
+        for staging, target, _ in self._staged:
+            if path.is_relative_to(staging):
+                return target / path.relative_to(staging)
+        return path
 
     def folder(self, target: str | os.PathLike[str]) -> Path:
         """A new empty folder to fill; it replaces the folder ``target`` at commit."""
@@ -156,6 +167,15 @@ def replacing_dir(target: str | os.PathLike[str]) -> Iterator[Path]:
     ``target`` when the block ends without error (see ``Replacement``)."""
     with Replacement() as outputs:
         yield outputs.folder(target)
+
+
+def copy_file(source: str | os.PathLike[str], target: str | os.PathLike[str]) -> None:
+    """Copy the file ``source`` to ``target`` (its folder made) with the umask's mode;
+    ``WriteError`` naming ``target`` on failure."""
+    target = Path(target)
+    with writing(target):
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(source, target)
 
 
 def copy_tree(source: str | os.PathLike[str], target: str | os.PathLike[str]) -> None:

@@ -7,6 +7,7 @@ synthetic experiment and on the helper ``sal_adapters.atomic`` itself:
   appears and just before it renames: the previous output is intact, byte for byte; the next
   run cleans the leftovers;
 * a full disk or a file where a folder belongs: one ``sal: error: cannot write PATH: ...``;
+* ``sal evaluate`` and ``sal report`` stopped midway: the previous results stay whole;
 * files 0644 and folders 0755 under umask 022, private under 077;
 * ``write_sequence`` into a symlink loop: one error naming the path.
 """
@@ -24,15 +25,18 @@ import sys
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from pytest_sal.cli import main
+from pytest_sal.testing import FakeSlam
 from sal_adapters import SalError, open_dataset, write_sequence
 from sal_adapters import atomic
 from sal_adapters.atomic import Replacement, recover, replacing_dir
 from sal_adapters.errors import WriteError
 from sal_adapters.textfiles import atomic_write_text
+from sal_wrappers import SYSTEMS
 
 NAME = "outputs"
 LEFTOVER = (".sal-tmp-", ".sal-old-")
@@ -129,6 +133,7 @@ import sys, time
 from pathlib import Path
 from sal_adapters.atomic import Replacement
 from pytest_sal.cli import main
+from pytest_sal.testing import FakeSlam
 
 def paused(self, target, text, write_text=Replacement.write_text):
     staged = write_text(self, target, text)
@@ -251,6 +256,42 @@ def test_write_sequence_into_a_symlink_loop_names_the_path(tmp_path: Path) -> No
     message = str(caught.value)
     assert str(target) in message and ("symlink loop" in message or "symbolic links" in message)
     assert "\n" not in message
+
+
+class StoppingSlam(FakeSlam):
+    """FakeSlam that stops the evaluation (a ``SalError``) when it meets the rain."""
+
+    def run(self, sequence: Any, workdir: Path, timeout: float | None = None) -> Any:
+        if sequence.name.endswith("+rain"):
+            raise SalError("stopped in the rain")
+        return super().run(sequence, workdir, timeout)
+
+
+def test_evaluate_and_report_stopped_midway_keep_the_previous_results(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    config = write_config(tmp_path, frames=4)
+    monkeypatch.chdir(tmp_path)
+    root = tmp_path / "results" / NAME
+    SYSTEMS.register("fake", FakeSlam)
+    try:
+        assert main(["evaluate", str(config), "--slam", "fake"]) == 0
+        assert main(["report", str(config)]) == 0
+        evaluated, reported = snapshot(root / "slam_results"), snapshot(root / "report")
+        assert "fake/metrics/summary.json" in evaluated and "assets" in reported
+        capsys.readouterr()
+        SYSTEMS.unregister("fake")
+        SYSTEMS.register("fake", StoppingSlam)
+
+        assert main(["evaluate", str(config), "--slam", "fake"]) == 2
+        assert capsys.readouterr().err == "sal: error: stopped in the rain\n"
+        assert snapshot(root / "slam_results") == evaluated and leftovers(root) == []
+
+        monkeypatch.setattr(shutil, "copyfile", lambda source, target: (_ for _ in ()).throw(OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))))
+        assert main(["report", str(config)]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"sal: error: cannot write {Path('results') / NAME / 'report' / 'assets'}/") and err.endswith(".png: No space left on device\n")
+        assert snapshot(root / "report") == reported and leftovers(root) == []
+    finally:
+        SYSTEMS.unregister("fake")
 
 
 # ------------------------------------------------------------------------------------ file modes
