@@ -178,6 +178,7 @@ class SalSession:
             if self.system_name not in SYSTEMS.names():
                 raise pytest.UsageError(f"pytest-sal: ini option sal_system = {self.system_name!r}: unknown SLAM system; known: {', '.join(SYSTEMS.names())}")
         self.outcomes: list[Any] = []
+        self.unwritten: list[str] = []  # outputs finish() could not write, said in the summary
         self._cache: Any = None
         self._history: Any = None
         if self.compare not in (None, "last") and self.history.runs():
@@ -294,6 +295,8 @@ class SalSession:
         terminal.section("pytest-sal robustness boundaries")
         for line in terminal_table(self.outcomes, width=max(self.config.get_terminal_writer().fullwidth, 120)):
             terminal.write_line(line)
+        for problem in self.unwritten:
+            terminal.write_line(f"pytest-sal: {problem}", red=True)
 
     def finish(self) -> None:
         """Write the history and the reports (controller only)."""
@@ -306,13 +309,21 @@ class SalSession:
         for outcome in self.outcomes:
             outcome.commit = commit + ("+dirty" if dirty else "")
             outcome.machine = machine.get("hostname", "")
-        if not self.config.option.sal_no_history:
-            self.history.append_run(self.outcomes, name=self.config.option.sal_save)
-        if self.config.option.sal_report_md:
-            from pytest_sal.report import write_markdown
+        from pytest_sal.report import write_html_report, write_markdown
+        from sal_adapters.atomic import writing
+        from sal_adapters.errors import WriteError
 
-            write_markdown(self.outcomes, Path(self.config.option.sal_report_md))
-        if self.config.option.sal_report_html:
-            from pytest_sal.report import write_html_report
-
-            write_html_report(self.outcomes, Path(self.config.option.sal_report_html))
+        option = self.config.option
+        writes = [
+            ("history", None if option.sal_no_history else self.history_dir, lambda: self.history.append_run(self.outcomes, name=option.sal_save)),
+            ("--sal-report-md", option.sal_report_md, lambda: write_markdown(self.outcomes, Path(option.sal_report_md))),
+            ("--sal-report-html", option.sal_report_html, lambda: write_html_report(self.outcomes, Path(option.sal_report_html))),
+        ]
+        for what, path, write in writes:
+            if path is None:
+                continue
+            try:  # a full disk or a read-only folder costs that output, not the tests' results
+                with writing(path):
+                    write()
+            except WriteError as exc:
+                self.unwritten.append(f"{what} not written: {exc}")

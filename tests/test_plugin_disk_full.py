@@ -1,0 +1,71 @@
+"""A full disk at the end of a pytest session (issue 12, point 3): the inner session's conftest
+makes every write under the history folder and the HTML report folder fail with ENOSPC. The
+session still prints its results and its robustness table, exits with the tests' status, says in
+one line per output which path could not be written and why, and writes the outputs it can
+(the Markdown report); the next session, with room again, saves its history."""
+
+from __future__ import annotations
+
+import pytest
+from plugin_suites import CONFTEST, HEADER, SMALL_DATASET, output, write_tracked
+
+#: every atomic write below a folder named in FULL fails like write(2) on a full disk
+FULL_DISK = '''
+import errno
+import os
+from pathlib import Path
+
+import sal_adapters.textfiles as textfiles
+
+FULL = [Path(p) for p in os.environ.get("SAL_TEST_FULL", "").split(os.pathsep) if p]
+_atomic_write = textfiles.atomic_write
+
+
+def _full_disk(path, write, binary=False):
+    if any(folder in Path(path).parents for folder in FULL):
+        def write(handle, write=write):
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+    return _atomic_write(path, write, binary)
+
+
+textfiles.atomic_write = _full_disk
+'''
+
+TESTS = '''
+
+@sal.require(tracking_rate >= 0.5, fog.visibility_m >= 30, tolerance=5, max_trials=6)
+def test_fog(sal_outcome):
+    pass
+'''
+
+
+def test_a_full_disk_at_session_end_costs_only_the_outputs_it_hits(pytester: pytest.Pytester, monkeypatch: pytest.MonkeyPatch) -> None:
+    pytester.makeconftest(CONFTEST + SMALL_DATASET + FULL_DISK)
+    write_tracked(pytester, {})
+    pytester.makepyfile(test_suite=HEADER + TESTS)
+    history, html, markdown = pytester.path / "history", pytester.path / "html", pytester.path / "md" / "report.md"
+    monkeypatch.setenv("SAL_TEST_FULL", f"{history}:{html}")
+    options = ["-p", "no:cacheprovider", "-p", "no:hypothesispytest", "--sal-cache-dir", str(pytester.path / "cache"),
+               "--sal-history-dir", str(history), "--sal-report-html", str(html), "--sal-report-md", str(markdown)]
+
+    full = pytester.runpytest_subprocess(*options, timeout=300)
+
+    assert full.ret == 0, output(full)
+    full.assert_outcomes(passed=1)
+    text = output(full)
+    assert "Traceback" not in text and "OSError" not in text
+    assert "pytest-sal robustness boundaries" in text  # the table is still printed
+    lines = [line for line in text.splitlines() if "not written" in line]
+    assert len(lines) == 2, text
+    assert lines[0].startswith(f"pytest-sal: history not written: cannot write {history}") and lines[0].endswith(": No space left on device")
+    assert lines[1].startswith(f"pytest-sal: --sal-report-html not written: cannot write {html}") and lines[1].endswith(": No space left on device")
+    assert ".sal-tmp" not in lines[1]  # the report's file, not its staging copy
+    assert markdown.is_file() and "test_fog" in markdown.read_text()  # what could be written was
+    assert not list(history.glob("*.json")) and not (html / "index.html").exists()
+    assert not [p for p in [*history.rglob("*"), *html.rglob("*")] if ".sal-tmp" in p.name or p.suffix == ".tmp"]
+
+    monkeypatch.delenv("SAL_TEST_FULL")
+    room = pytester.runpytest_subprocess(*options, timeout=300)
+    room.assert_outcomes(passed=1)
+    assert "not written" not in output(room)
+    assert len(list(history.glob("*.json"))) == 1 and (html / "index.html").is_file()
