@@ -17,6 +17,7 @@ Any ``OSError`` while writing becomes one ``WriteError`` naming the path.
 from __future__ import annotations
 
 import ctypes
+import errno
 import os
 import re
 import secrets
@@ -44,6 +45,8 @@ def writing(path: str | os.PathLike[str]) -> Iterator[None]:
         yield
     except WriteError:
         raise
+    except FileExistsError as exc:  # mkdir(exist_ok=True) met a file where a folder belongs
+        raise WriteError(path, OSError(errno.ENOTDIR, f"{exc.filename} is a file, not a folder")) from exc
     except OSError as exc:
         raise WriteError(path, exc) from exc
 

@@ -81,6 +81,13 @@ def sal(*args: str | Path, cwd: Path, **kwargs: object) -> subprocess.Popen[byte
     return subprocess.Popen([sys.executable, "-m", "pytest_sal.cli", *map(str, args)], cwd=cwd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, **kwargs)  # type: ignore[call-overload]
 
 
+def error_line(capsys: pytest.CaptureFixture[str]) -> str:
+    """The one ``sal: error:`` line on stderr (progress bars may come before it)."""
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and err.count("sal: error:") == 1, err
+    return err.splitlines()[-1]
+
+
 def finished(process: subprocess.Popen[bytes]) -> None:
     _, err = process.communicate(timeout=300)
     assert process.returncode == 0, err.decode()
@@ -215,8 +222,7 @@ def test_disk_full_is_one_line_naming_the_path_and_keeps_the_output(tmp_path: Pa
     monkeypatch.setattr(shutil, "copyfile", full_disk)
     assert main(["perturb", str(config)]) == 2
 
-    err = capsys.readouterr().err
-    assert err == f"sal: error: cannot write {Path('results') / NAME / 'images' / 'fog'}: No space left on device\n"
+    assert error_line(capsys) == f"sal: error: cannot write {Path('results') / NAME / 'images' / 'fog'}: No space left on device"
     assert snapshot(root) == before
     assert leftovers(root) == []
 
@@ -228,8 +234,14 @@ def test_a_file_where_the_output_folder_belongs_is_one_line(tmp_path: Path, monk
 
     assert main(["perturb", str(config)]) == 2
 
-    err = capsys.readouterr().err
-    assert err == f"sal: error: cannot write {Path('taken/results') / NAME / 'images' / 'fog'}: Not a directory\n"
+    assert error_line(capsys) == f"sal: error: cannot write {Path('taken/results') / NAME / 'images' / 'fog'}: Not a directory"
+
+    (tmp_path / "taken").unlink()
+    (tmp_path / "taken" / "results" / NAME).mkdir(parents=True)
+    (tmp_path / "taken" / "results" / NAME / "images").write_text("a file, not a folder\n")
+    assert main(["perturb", str(config)]) == 2
+    images = Path("taken/results") / NAME / "images"
+    assert error_line(capsys) == f"sal: error: cannot write {images / 'fog'}: {images} is a file, not a folder"
 
 
 def test_atomic_write_on_a_full_disk_names_the_file_and_keeps_the_old_one(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -282,13 +294,13 @@ def test_evaluate_and_report_stopped_midway_keep_the_previous_results(tmp_path: 
         SYSTEMS.register("fake", StoppingSlam)
 
         assert main(["evaluate", str(config), "--slam", "fake"]) == 2
-        assert capsys.readouterr().err == "sal: error: stopped in the rain\n"
+        assert error_line(capsys) == "sal: error: stopped in the rain"
         assert snapshot(root / "slam_results") == evaluated and leftovers(root) == []
 
         monkeypatch.setattr(shutil, "copyfile", lambda source, target: (_ for _ in ()).throw(OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))))
         assert main(["report", str(config)]) == 2
-        err = capsys.readouterr().err
-        assert err.startswith(f"sal: error: cannot write {Path('results') / NAME / 'report' / 'assets'}/") and err.endswith(".png: No space left on device\n")
+        err = error_line(capsys)
+        assert err.startswith(f"sal: error: cannot write {Path('results') / NAME / 'report' / 'assets'}/") and err.endswith(".png: No space left on device")
         assert snapshot(root / "report") == reported and leftovers(root) == []
     finally:
         SYSTEMS.unregister("fake")
@@ -297,7 +309,7 @@ def test_evaluate_and_report_stopped_midway_keep_the_previous_results(tmp_path: 
 # ------------------------------------------------------------------------------------ file modes
 
 
-@pytest.mark.parametrize(("umask", "file_mode", "dir_mode"), [(0o022, 0o644, 0o755), (0o077, 0o600, 0o700)])
+@pytest.mark.parametrize(("umask", "file_mode", "dir_mode"), [(0o022, 0o644, 0o755), (0o077, 0o600, 0o700)], ids=["umask-022", "umask-077"])
 def test_outputs_and_caches_get_the_umask_permissions(tmp_path: Path, umask: int, file_mode: int, dir_mode: int) -> None:
     config = write_config(tmp_path, frames=3)
     env = {**os.environ, "SAL_CACHE_DIR": str(tmp_path / "renders")}  # rendered under this umask
