@@ -12,8 +12,8 @@ The envelope's edge is the *mild* end of the range (``upper_bound`` for a parame
 worse when lower, such as ``fog.visibility_m``; ``lower_bound`` otherwise), so the first trial
 decides whether the system passes there at all; the search then brackets the failure point
 towards the severe end and bisects it down to ``tolerance`` or ``max_iters`` trials. Trials are
-kept in the content cache, so running the command again costs no SLAM run. The search's folder
-(runs, plot, summary) is built beside the previous one and swapped in when complete.
+kept in the content cache, so running the command again costs no SLAM run. The plot and the
+summary are written beside the previous ones and replace them together when both are complete.
 """
 
 from __future__ import annotations
@@ -162,28 +162,28 @@ def run_boundary(
         [*criteria, envelope], tolerance=rb.tolerance, max_trials=rb.max_iters, search_range=(rb.lower_bound, rb.upper_bound)
     )
     clean = build_sequence(config)
-    final = config.output_dir() / "robustness_boundary" / system.name / rb.name
+    folder = config.output_dir() / "robustness_boundary" / system.name / rb.name
     cache = command_cache(cache_dir) if use_cache else None
-    with Replacement() as outputs:  # the previous search's folder stays whole until this one is written
-        folder = outputs.folder(final)
-        runner = TrialRunner(
-            clean, ref, system, requirement, runs=runs, seed=config.experiment.seed, cache=cache, workdir=folder / "runs", timeout=timeout,
-            progress=_progress_printer(ref.unit, out),
-        )
-        unit = ref.unit
-        unit_text = f" {unit}" if unit else ""
-        sweep = linear_sweep_trials(rb.lower_bound, rb.upper_bound, rb.tolerance)
-        print(f"boundary    {rb.name}: {ref.label} in {rb.lower_bound:g} .. {rb.upper_bound:g}{unit_text} (gets worse {worse}), "
-              f"tolerance {rb.tolerance:g}{unit_text}, max_iters {rb.max_iters}", file=out)
-        print(f"system      {system.name} {json.dumps(system.options(), sort_keys=True)}, up to {runner.policy.max_runs} run(s) per trial", file=out)
-        print(f"dataset     {config.dataset.type} {clean.name}: {len(clean)} frames, {clean.sensor}", file=out)
-        print(f"requirement {requirement}", file=out)
-        test_id = f"sal boundary {config.experiment.name}/{rb.name}"
-        outcome = search_outcome(runner, requirement, SearchSettings(), test_id)
-        plot, path = final / "boundary_plot.png", final / "boundary_summary.json"
-        metric_plot(outcome, folder / plot.name)
+    runner = TrialRunner(
+        clean, ref, system, requirement, runs=runs, seed=config.experiment.seed, cache=cache, workdir=folder / "runs", timeout=timeout,
+        progress=_progress_printer(ref.unit, out),
+    )
+    unit = ref.unit
+    unit_text = f" {unit}" if unit else ""
+    sweep = linear_sweep_trials(rb.lower_bound, rb.upper_bound, rb.tolerance)
+    print(f"boundary    {rb.name}: {ref.label} in {rb.lower_bound:g} .. {rb.upper_bound:g}{unit_text} (gets worse {worse}), "
+          f"tolerance {rb.tolerance:g}{unit_text}, max_iters {rb.max_iters}", file=out)
+    print(f"system      {system.name} {json.dumps(system.options(), sort_keys=True)}, up to {runner.policy.max_runs} run(s) per trial", file=out)
+    print(f"dataset     {config.dataset.type} {clean.name}: {len(clean)} frames, {clean.sensor}", file=out)
+    print(f"requirement {requirement}", file=out)
+    test_id = f"sal boundary {config.experiment.name}/{rb.name}"
+    outcome = search_outcome(runner, requirement, SearchSettings(), test_id)
+    plot, path = folder / "boundary_plot.png", folder / "boundary_summary.json"
+    with Replacement() as outputs:  # the plot and the summary replace the previous search's together
+        staging = outputs.entries(folder)
+        metric_plot(outcome, staging / plot.name)
         summary = _summary(outcome, config, rb, ref, pert.type, sweep, plot)
-        atomic_write_text(folder / path.name, json.dumps(summary, indent=2) + "\n")
+        atomic_write_text(staging / path.name, json.dumps(summary, indent=2) + "\n")
     cached = outcome.cached_trials
     print(f"boundary    {ref.label} {outcome.boundary.text()} ({outcome.termination}); "
           f"{len(outcome.trials)} trials, {outcome.runs} runs ({cached} trials cached) vs {sweep} for a linear sweep at {rb.tolerance:g}{unit_text} steps; "

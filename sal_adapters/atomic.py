@@ -235,8 +235,8 @@ def _alive(pid: int) -> bool:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
-    except OSError:  # another user's process
-        return True
+    except PermissionError:  # another user's process
+        pass
     return True
 
 
