@@ -17,6 +17,7 @@ import pytest
 from pytest_sal.session import SAL_SESSION, SalSession, add_options, outcome_of
 
 __all__ = [
+    "PendingSearch",
     "pytest_addoption",
     "pytest_collection_modifyitems",
     "pytest_configure",
@@ -159,24 +160,39 @@ def sal_level(request: pytest.FixtureRequest) -> Any:
 @pytest.fixture
 def sal_outcome(request: pytest.FixtureRequest, sal_dataset: Any, sal_system: Any, sal_runs: int | None, tmp_path: Path) -> Any:
     """The ``Outcome`` of the boundary search of this test's ``sal.require``: verdict,
-    boundary interval, trials and their metrics. A requirement that does not hold fails the
-    test before its body runs."""
-    session: SalSession = request.config.stash[SAL_SESSION]
-    outcome = session.search(request.node, sal_dataset, sal_system, sal_runs, tmp_path)
-    request.node.stash[OUTCOME] = outcome
-    return outcome
+    boundary interval, trials and their metrics. The search runs in the test's call phase
+    (as hypothesis runs its examples), so it is booked as the test's time, an error in it
+    fails the test and Ctrl-C interrupts the session cleanly; a requirement that does not
+    hold fails the test before its body runs. Read it in the test body: a fixture that asks
+    for ``sal_outcome`` gets the pending search, not its result."""
+    return PendingSearch(request.node, sal_dataset, sal_system, sal_runs, tmp_path)
 
 
 @pytest.fixture
 def sal_trial(request: pytest.FixtureRequest, sal_level: Any, sal_dataset: Any, sal_system: Any, sal_runs: int | None, tmp_path: Path) -> Any:
     """The ``Trial`` at this item's ``sal.sweep`` level or ``sal.at`` point: ``metrics``
-    (ate_rmse, tracking_rate, ...), ``passed``, ``runs``. A level that misses the requirement
-    fails the test before its body runs."""
-    session: SalSession = request.config.stash[SAL_SESSION]
-    ref, _, value = sal_level
-    outcome = session.single(request.node, ref, value, sal_dataset, sal_system, sal_runs, tmp_path)
-    request.node.stash[OUTCOME] = outcome
-    return outcome.trials[0]
+    (ate_rmse, tracking_rate, ...), ``passed``, ``runs``. Run in the call phase like
+    ``sal_outcome``; a level that misses the requirement fails the test before its body runs."""
+    return PendingSearch(request.node, sal_dataset, sal_system, sal_runs, tmp_path, level=sal_level)
+
+
+class PendingSearch:
+    """What ``sal_outcome`` / ``sal_trial`` hold until the call phase runs the search and
+    hands the test body its result."""
+
+    def __init__(self, item: pytest.Item, dataset: Any, system: Any, runs: int | None, workdir: Path, level: Any = None):
+        self.item, self.dataset, self.system, self.runs, self.workdir, self.level = item, dataset, system, runs, workdir, level
+
+    def run(self) -> Any:
+        """The outcome: the boundary search, or the one trial at the sweep level."""
+        session: SalSession = self.item.config.stash[SAL_SESSION]
+        if self.level is None:
+            return session.search(self.item, self.dataset, self.system, self.runs, self.workdir)
+        ref, _, value = self.level
+        return session.single(self.item, ref, value, self.dataset, self.system, self.runs, self.workdir)
+
+    def __getattr__(self, name: str) -> Any:
+        raise AttributeError(f"{name!r}: the search has not run yet; pytest-sal runs it in the test's call phase, so read sal_outcome / sal_trial in the test body, not in a fixture")
 
 
 def _ref_of(request: pytest.FixtureRequest) -> Any:
@@ -190,14 +206,21 @@ def _ref_of(request: pytest.FixtureRequest) -> Any:
 # -- the verdict and the report ----------------------------------------------------------------
 @pytest.hookimpl(tryfirst=True)
 def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> None:
-    """Fail a robustness test whose requirement does not hold (or whose boundary regressed)
-    in its call phase, so it is reported FAILED with the search's message."""
-    outcome = pyfuncitem.stash.get(OUTCOME, None)
-    if outcome is not None and not outcome.passed:
-        from pytest_sal.robustness import failure_message
+    """Run the search of a robustness test in its call phase and hand the body its result;
+    fail the test when its requirement does not hold (or its boundary regressed), so it is
+    reported FAILED with the search's message."""
+    for name in ("sal_outcome", "sal_trial"):
+        pending = pyfuncitem.funcargs.get(name)
+        if not isinstance(pending, PendingSearch):
+            continue
+        outcome = pending.run()
+        pyfuncitem.stash[OUTCOME] = outcome
+        pyfuncitem.funcargs[name] = outcome if name == "sal_outcome" else outcome.trials[0]
+        if not outcome.passed:
+            from pytest_sal.robustness import failure_message
 
-        __tracebackhide__ = True
-        pytest.fail(failure_message(outcome), pytrace=False)
+            __tracebackhide__ = True
+            pytest.fail(failure_message(outcome), pytrace=False)
 
 
 @pytest.hookimpl(wrapper=True)
