@@ -165,7 +165,7 @@ class SalSession:
             tolerance_pct=_ini_number(config, "sal_tolerance"),
             max_trials=_ini_number(config, "sal_max_trials"),
         )
-        if self.use_cache:
+        if self.use_cache and not self.cache_dir.is_dir():  # an existing read-only cache serves what it holds
             _check_writable(self.cache_dir, "cache folder (--sal-cache-dir, ini sal_cache_dir)", folder=True)
         if not getattr(opt, "sal_no_history", False):
             _check_writable(self.history_dir, "history folder (--sal-history-dir, ini sal_history_dir)", folder=True)

@@ -4,11 +4,9 @@ serves what it holds; a failure the machine decided is not stored."""
 
 from __future__ import annotations
 
-import errno
 import hashlib
 import json
 import math
-import os
 import signal
 import warnings
 from collections.abc import Callable
@@ -17,6 +15,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from faults import refuse_writes_under
 
 from pytest_sal import tracking_rate
 from pytest_sal.cache import CacheWarning, ContentCache
@@ -156,22 +155,7 @@ def test_a_damaged_cached_frame_is_rendered_again(tmp_path: Path, damage: str) -
 def read_only(monkeypatch: pytest.MonkeyPatch) -> Callable[[Path], None]:
     """``read_only(root)``: from now on every write under ``root`` fails with EROFS, as on a
     read-only mount (the tests run as root, which ignores file modes)."""
-
-    def mount(root: Path) -> None:
-        def guard(real: Callable[..., Any]) -> Callable[..., Any]:
-            def refuse(path: Any, *args: Any, **kwargs: Any) -> Any:
-                writes = real is not real_open or args[0] & (os.O_WRONLY | os.O_RDWR | os.O_CREAT)
-                if writes and os.path.abspath(os.fspath(path)).startswith(str(root)):
-                    raise OSError(errno.EROFS, os.strerror(errno.EROFS), os.fspath(path))
-                return real(path, *args, **kwargs)
-
-            return refuse
-
-        real_open = os.open
-        for name in ("open", "mkdir", "rename", "replace", "unlink", "rmdir", "utime"):
-            monkeypatch.setattr(os, name, guard(getattr(os, name)))
-
-    return mount
+    return lambda root: refuse_writes_under(root, monkeypatch.setattr)
 
 
 def snapshot(root: Path) -> dict[str, tuple[int, int]]:
