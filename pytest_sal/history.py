@@ -302,11 +302,24 @@ def _read_run(path: Path) -> RunRecord | None:
             dirty=bool(data.get("dirty", False)),
             machine=dict(data.get("machine") or {}),
             name=data.get("name"),
-            outcomes=[Outcome.from_dict(o) for o in data.get("outcomes", [])],
+            outcomes=_readable_outcomes(path, data.get("outcomes", [])),
         )
     except (OSError, ValueError, TypeError, KeyError, AttributeError) as exc:
         warnings.warn(f"{path}: not a readable pytest-sal run, skipped ({exc})", stacklevel=3)
         return None
+
+
+def _readable_outcomes(path: Path, stored: list[Any]) -> list[Outcome]:
+    """The run's outcomes; one that is not readable (a number edited into text or NaN) is
+    skipped with a warning naming the file, the test and the key, the others are kept."""
+    outcomes = []
+    for number, data in enumerate(stored, 1):
+        try:
+            outcomes.append(Outcome.from_dict(data))
+        except (ValueError, TypeError, KeyError, AttributeError) as exc:
+            test = data.get("test_id", "?") if isinstance(data, dict) else "?"
+            warnings.warn(f"{path}: outcome {number} ({test}) skipped: {exc}", stacklevel=4)
+    return outcomes
 
 
 def _safe_name(name: str) -> str:

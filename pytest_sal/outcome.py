@@ -7,6 +7,7 @@ Values are in the parameter's declared unit (what ``sal modules`` prints: lx, IS
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -187,10 +188,40 @@ class Outcome:
         (``pytest_sal.units``)."""
         from pytest_sal.units import upgrade_outcome
 
+        _check_numbers(data)
         data = upgrade_outcome(dict(data))
         data.pop("confidence", None)
         data["boundary"] = Boundary(**data["boundary"])
         data["previous"] = None if data.get("previous") is None else Boundary(**data["previous"])
         data["trials"] = [Trial(**{k: v for k, v in t.items() if k != "repeat"}) for t in data.get("trials", [])]
+        for trial in data["trials"]:
+            trial.metrics = {k: None if isinstance(v, float) and not math.isfinite(v) else v for k, v in trial.metrics.items()}
         data["criteria"] = [(str(m), str(op), float(v)) for m, op, v in data.get("criteria", [])]
         return cls(**data)
+
+
+def _check_numbers(data: Any) -> None:
+    """Refuse a stored outcome whose numbers are not finite numbers or null (a hand-edited
+    history: ``pass_value: "abc"`` or ``NaN``), naming the key: ``ValueError``."""
+    if not isinstance(data, dict) or not isinstance(data.get("boundary"), dict):
+        raise ValueError("not an outcome (no boundary)")
+    places: list[tuple[str, Any]] = [("edge", data.get("edge")), ("margin", data.get("margin"))]
+    for name in ("boundary", "previous"):
+        bounds = data.get(name) or {}
+        if not isinstance(bounds, dict):
+            raise ValueError(f"{name} is not a mapping")
+        places += [(f"{name}.{end}", bounds.get(end)) for end in ("pass_value", "fail_value")]
+    trials = data.get("trials") or []
+    if not isinstance(trials, list) or not all(isinstance(t, dict) for t in trials):
+        raise ValueError("trials is not a list of trials")
+    for i, trial in enumerate(trials):
+        places.append((f"trials[{i}].value", trial.get("value", "missing")))
+        metrics = trial.get("metrics") or {}
+        if not isinstance(metrics, dict):
+            raise ValueError(f"trials[{i}].metrics is not a mapping")
+        for name, value in metrics.items():  # NaN: not available, read as null
+            if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))):
+                raise ValueError(f"trials[{i}].metrics.{name} = {str(value)[:40]!r} is not a number")
+    for key, value in places:
+        if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value)):
+            raise ValueError(f"{key} = {str(value)[:40]!r} is not a finite number")

@@ -132,6 +132,43 @@ def test_unreadable_file_is_skipped_with_a_warning(tmp_path: Path) -> None:
         assert [r.label for r in History(tmp_path).runs()] == ["0001"]
 
 
+@pytest.mark.parametrize(
+    "edit, key",
+    [
+        (lambda o: o["boundary"].update(pass_value="abc"), "boundary.pass_value = 'abc' is not a finite number"),
+        (lambda o: o["boundary"].update(fail_value=float("nan")), "boundary.fail_value = 'nan' is not a finite number"),
+        (lambda o: o.update(edge=float("inf")), "edge = 'inf' is not a finite number"),
+        (lambda o: o["trials"][0].update(value=[1]), "trials[0].value = '[1]' is not a finite number"),
+        (lambda o: o["trials"][0]["metrics"].update(ate_rmse="low"), "trials[0].metrics.ate_rmse = 'low' is not a number"),
+        (lambda o: o.update(boundary=7), "not an outcome (no boundary)"),
+    ],
+    ids=["text", "nan", "inf", "list", "metric-text", "no-boundary"],
+)
+def test_an_edited_outcome_is_skipped_with_a_warning_naming_the_key(tmp_path: Path, edit, key: str) -> None:
+    """A hand-edited history number (``pass_value: "abc"``, NaN) used to raise TypeError in
+    the search or print ``+nan %``: the outcome is skipped, the run's others are kept, and the
+    comparison falls back on the newest readable run."""
+    save(History(tmp_path), [fog(20, 18)])
+    path = save(History(tmp_path), [fog(22, 20), drop(0.3, 0.33)])
+    data = json.loads(path.read_text())
+    edit(data["outcomes"][0])
+    path.write_text(json.dumps(data))
+    with pytest.warns(UserWarning) as caught:
+        runs = History(tmp_path).runs()
+    assert [str(w.message) for w in caught] == [f"{path}: outcome 1 ({FOG}) skipped: {key}"]
+    assert [len(r.outcomes) for r in runs] == [1, 1]  # the frame-drop outcome of run 2 is kept
+    with pytest.warns(UserWarning):
+        previous = History(tmp_path).previous(outcome_key(fog(1, 2)))
+    assert previous is not None and previous.boundary.pass_value == 20
+
+
+def test_a_nan_metric_in_the_history_reads_as_not_available(tmp_path: Path) -> None:
+    path = save(History(tmp_path), [fog(22, 20)])
+    path.write_text(path.read_text().replace('"ate_rmse": 0.3', '"ate_rmse": NaN'))
+    (outcome,) = History(tmp_path).runs()[0].outcomes
+    assert outcome.trials[0].metrics["ate_rmse"] is None
+
+
 def test_previous_by_last_number_name_and_commit(tmp_path: Path) -> None:
     history = History(tmp_path)
     save(history, [fog(15, 14)], commit="aaaa111", name="baseline")
