@@ -201,8 +201,9 @@ class Outcome:
 
 
 def _check_numbers(data: Any) -> None:
-    """Refuse a stored outcome whose numbers are not finite numbers or null (a hand-edited
-    history: ``pass_value: "abc"`` or ``NaN``), naming the key: ``ValueError``."""
+    """Refuse a stored outcome whose values and bounds are not finite numbers or null (a
+    hand-edited history: ``pass_value: "abc"`` or ``NaN``), naming the key: ``ValueError``.
+    Metrics are free-form (``failures`` is a list); a NaN metric is read as null."""
     if not isinstance(data, dict) or not isinstance(data.get("boundary"), dict):
         raise ValueError("not an outcome (no boundary)")
     places: list[tuple[str, Any]] = [("edge", data.get("edge")), ("margin", data.get("margin"))]
@@ -216,12 +217,8 @@ def _check_numbers(data: Any) -> None:
         raise ValueError("trials is not a list of trials")
     for i, trial in enumerate(trials):
         places.append((f"trials[{i}].value", trial.get("value", "missing")))
-        metrics = trial.get("metrics") or {}
-        if not isinstance(metrics, dict):
+        if not isinstance(trial.get("metrics") or {}, dict):
             raise ValueError(f"trials[{i}].metrics is not a mapping")
-        for name, value in metrics.items():  # NaN: not available, read as null
-            if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))):
-                raise ValueError(f"trials[{i}].metrics.{name} = {str(value)[:40]!r} is not a number")
     for key, value in places:
         if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value)):
             raise ValueError(f"{key} = {str(value)[:40]!r} is not a finite number")

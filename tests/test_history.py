@@ -139,10 +139,10 @@ def test_unreadable_file_is_skipped_with_a_warning(tmp_path: Path) -> None:
         (lambda o: o["boundary"].update(fail_value=float("nan")), "boundary.fail_value = 'nan' is not a finite number"),
         (lambda o: o.update(edge=float("inf")), "edge = 'inf' is not a finite number"),
         (lambda o: o["trials"][0].update(value=[1]), "trials[0].value = '[1]' is not a finite number"),
-        (lambda o: o["trials"][0]["metrics"].update(ate_rmse="low"), "trials[0].metrics.ate_rmse = 'low' is not a number"),
+        (lambda o: o["trials"][0].update(metrics=[0.3]), "trials[0].metrics is not a mapping"),
         (lambda o: o.update(boundary=7), "not an outcome (no boundary)"),
     ],
-    ids=["text", "nan", "inf", "list", "metric-text", "no-boundary"],
+    ids=["text", "nan", "inf", "list", "metrics-list", "no-boundary"],
 )
 def test_an_edited_outcome_is_skipped_with_a_warning_naming_the_key(tmp_path: Path, edit, key: str) -> None:
     """A hand-edited history number (``pass_value: "abc"``, NaN) used to raise TypeError in
