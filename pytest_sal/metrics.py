@@ -21,7 +21,7 @@ from scipy.spatial.transform import Rotation
 from sal_adapters.errors import SalError
 from sal_adapters.trajectory import Trajectory
 from sal_wrappers.base import RunResult
-from sal_wrappers.command import WRITTEN_BEFORE_FAILURE
+from sal_wrappers.base import WRITTEN_BEFORE_FAILURE
 
 __all__ = [
     "AGGREGATED",

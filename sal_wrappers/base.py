@@ -22,7 +22,11 @@ import numpy as np
 from sal_adapters import Sequence, Trajectory
 from sal_adapters.errors import SalError
 
-__all__ = ["RunResult", "SlamSystem", "SlamSystemError", "TrackState", "file_sha256"]
+__all__ = ["WRITTEN_BEFORE_FAILURE", "RunResult", "SlamSystem", "SlamSystemError", "TrackState", "file_sha256"]
+
+#: ``RunResult.info`` key: the system wrote its whole result before it failed (a crash at
+#: shutdown); the run is scored all the same and keeps its ``failure``.
+WRITTEN_BEFORE_FAILURE = "written_before_failure"
 
 
 class SlamSystemError(SalError):

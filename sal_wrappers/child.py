@@ -47,6 +47,7 @@ class ChildOutcome:
         wall_time_s: from start to exit (s).
         log_path: the child's stdout and stderr.
         log_tail: the last lines of that log.
+        timed_out: the child was killed at the deadline.
     """
 
     result: dict[str, Any] | None
@@ -55,6 +56,7 @@ class ChildOutcome:
     wall_time_s: float
     log_path: Path
     log_tail: str
+    timed_out: bool = False
 
 
 def describe_exit(status: int) -> str:
@@ -127,7 +129,7 @@ def run_child(
         failure = describe_exit(status)
     elif result is None:
         failure = "the child exited without writing a result"
-    return ChildOutcome(result, status, failure, wall, log_path, log_tail(log_path))
+    return ChildOutcome(result, status, failure, wall, log_path, log_tail(log_path), timed_out)
 
 
 def write_result(path: Path, data: dict[str, Any]) -> None:

@@ -64,7 +64,7 @@ from sal_adapters.textfiles import (
     format_float,
 )
 from sal_adapters.trajectory import seconds_to_ns
-from sal_wrappers.base import RunResult, SlamSystem, SlamSystemError, TrackState, file_sha256
+from sal_wrappers.base import WRITTEN_BEFORE_FAILURE, RunResult, SlamSystem, SlamSystemError, TrackState, file_sha256
 from sal_wrappers.child import describe_exit, log_tail
 from sal_wrappers.command_output import (
     OUTPUT_FORMATS,
@@ -78,10 +78,8 @@ from sal_wrappers.command_output import (
 )
 from sal_wrappers.process_group import run_process_group
 
-__all__ = ["PLACEHOLDERS", "WRITTEN_BEFORE_FAILURE", "CommandSystem"]
+__all__ = ["PLACEHOLDERS", "CommandSystem"]
 
-#: ``RunResult.info`` key: the program wrote its trajectory and then failed; it is scored.
-WRITTEN_BEFORE_FAILURE = "written_before_failure"
 
 #: Every placeholder and what it becomes (paths are absolute).
 PLACEHOLDERS: dict[str, str] = {

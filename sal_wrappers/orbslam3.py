@@ -34,7 +34,9 @@ per-frame states are kept. Otherwise ``failure`` is set when the child did not f
 status, signal, timeout. The child writes its per-frame
 records about once a second and before shutting down and saving, so a crash in saving or a
 timeout still leaves the per-frame states and poses; ``failure`` then says what was kept and
-``info["partial"]`` is ``True``.
+``info["partial"]`` is ``True``. A crash after the last frame (while shutting down or saving,
+not a timeout) also sets ``info["written_before_failure"]``: every frame's result is there, so
+the run is scored like a clean one and keeps its ``failure``.
 
 Machine load (``sal_wrappers.load``): the child records when each frame was handed over, its
 CPU time and the load average, and ``RunResult.load`` says whether the run kept up with the
@@ -60,7 +62,7 @@ from typing import Any
 import numpy as np
 
 from sal_adapters import Sequence, Trajectory
-from sal_wrappers.base import RunResult, SlamSystem, SlamSystemError, TrackState
+from sal_wrappers.base import WRITTEN_BEFORE_FAILURE, RunResult, SlamSystem, SlamSystemError, TrackState
 from sal_wrappers.child import ChildOutcome, run_child, write_result
 from sal_wrappers.load import load_figures, process_usage, repace
 from sal_wrappers.orbslam3_settings import OrbParameters, write_settings
@@ -373,10 +375,14 @@ class OrbSlam3(SlamSystem):
         partial = failure is not None and bool(reported)
         if failure is None and trajectory is None:
             failure = f"never initialised: no frame of {n} was tracked"  # the child ran to the end
+        # a crash after the last frame (shutting down, saving the final map) leaves every frame's result
+        written = partial and phase in ("shutdown", "saving") and len(reported) == n and not outcome.timed_out
         if failure is not None:
             if phase in _PHASES:
                 failure += f" {_PHASES[phase]}"
-            if partial:
+            if written:
+                failure += f"; the per-frame results of all {n} frames are kept and scored"
+            elif partial:
                 failure += f"; the per-frame results of {len(reported)} of {n} frames are kept"
         track_times = np.asarray(data.get("track_times", []), dtype=np.float64)
         given = np.asarray(data.get("given", []), dtype=np.float64)
@@ -400,6 +406,7 @@ class OrbSlam3(SlamSystem):
             "frames_reported": len(reported),
             "phase": phase,
             "partial": partial,
+            WRITTEN_BEFORE_FAILURE: written,
             "final_path": str(final_path) if final is not None else None,
         }
         if final_error:

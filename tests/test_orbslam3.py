@@ -38,6 +38,7 @@ from sal_adapters.datasets import open_dataset  # noqa: E402
 from sal_wrappers import RunResult, SlamSystemError, TrackState, create  # noqa: E402
 from sal_wrappers import orbslam3 as orbslam3_module  # noqa: E402
 from sal_wrappers.child import ChildOutcome  # noqa: E402
+from pytest_sal.metrics import evaluate  # noqa: E402
 from sal_wrappers.load import repace  # noqa: E402
 from sal_wrappers.orbslam3 import ORB_STATES, OrbSlam3, map_states, read_final_trajectory, segment_ids  # noqa: E402
 from sal_wrappers.orbslam3_settings import (  # noqa: E402
@@ -308,13 +309,36 @@ def test_crash_while_saving_keeps_per_frame_results(tmp_path: Path) -> None:
     result = system._result(sequence, "rgbd", outcome, header, tmp_path / "final.txt")
     assert not result.ok
     assert result.failure == (
-        "killed by SIGSEGV (segmentation fault) while saving the final trajectory; the per-frame results of 4 of 4 frames are kept"
+        "killed by SIGSEGV (segmentation fault) while saving the final trajectory; the per-frame results of all 4 frames are kept and scored"
     )
-    assert result.info["partial"] is True and result.exit_status == -11
+    assert result.info["partial"] is True and result.info["written_before_failure"] is True and result.exit_status == -11
     assert result.tracked == 2 and result.maps == 1 and len(result.trajectory) == 2
     assert result.final_trajectory is None
     assert result.track_time_s == pytest.approx(0.15)
     RunResult.from_json(result.to_json())  # JSON-ready
+
+
+@pytest.mark.parametrize(
+    "phase, frames_reported, timed_out, scored",
+    [("shutdown", 8, False, True), ("saving", 8, False, True), ("tracking", 6, False, False), ("shutdown", 8, True, False)],
+    ids=["crash-at-shutdown", "crash-while-saving", "crash-while-tracking", "timeout-at-shutdown"],
+)
+def test_a_crash_after_the_last_frame_is_scored(tmp_path: Path, phase: str, frames_reported: int, timed_out: bool, scored: bool) -> None:
+    """ORB-SLAM3 sometimes segfaults at shutdown after tracking every frame: the run keeps its
+    failure but is scored like a clean one (issue 12 point 8); a crash while tracking or a
+    timeout is not."""
+    sequence = open_dataset("synthetic", scene="indoor", frames=8, sensor="rgbd")
+    poses = [m.ravel().tolist() for m in sequence.groundtruth.matrices]
+    record = {"phase": phase, "raw_states": [OK] * frames_reported, "poses": poses[:frames_reported], "track_times": [0.03] * frames_reported, "final_saved": False}
+    failure = "timed out after 5 s and was killed" if timed_out else "killed by SIGSEGV (segmentation fault)"
+    outcome = ChildOutcome(record, -11 if not timed_out else -9, failure, 3.0, tmp_path / "orbslam3.log", "", timed_out)
+    result = create("orbslam3")._result(sequence, "rgbd", outcome, {"settings": "s.yaml", "vocabulary": "v.txt"}, tmp_path / "final.txt")
+    metrics = evaluate(result, sequence.groundtruth)
+    assert result.info["written_before_failure"] is scored and metrics.failure == result.failure
+    if scored:
+        assert metrics.ate_rmse == pytest.approx(0.0, abs=1e-9) and result.failure.endswith("the per-frame results of all 8 frames are kept and scored")
+    else:
+        assert metrics.ate_rmse is None
 
 
 # -- machine load: re-pacing a run that fell behind (fake child) ------------------------------
