@@ -9,6 +9,7 @@ only the controller collects them, prints the summary and writes history and rep
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -226,6 +227,9 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> None:
 @pytest.hookimpl(wrapper=True)
 def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) -> Any:
     report = yield
+    errors = sys.modules.get("sal_adapters.errors")  # not loaded: the error cannot be a SalError
+    if call.excinfo is not None and errors is not None and call.excinfo.errisinstance(errors.SalError):
+        report.longrepr = call.excinfo.getrepr(style="value")  # its message is the whole story (a dataset file:line)
     outcome = item.stash.get(OUTCOME, None)
     if outcome is not None and report.when == "call":
         properties = [
