@@ -27,7 +27,7 @@ from sal_adapters.datasets import DatasetKind
 from sal_adapters.errors import DatasetError, DatasetWarning
 from sal_adapters.images import probe_image, write_image
 from sal_adapters.sequence import Frame, FrameRecord, Sequence
-from sal_adapters.textfiles import atomic_write_text, read_rows, read_text
+from sal_adapters.textfiles import atomic_write_text, check_times, read_rows, read_text
 from sal_adapters.trajectory import Trajectory, seconds_to_ns
 
 __all__ = ["EUROC", "EurocDataset", "CameraSensor", "FrameRow", "read_camera_sensor", "read_sensor_yaml", "read_frame_csv"]
@@ -260,10 +260,8 @@ def read_frame_csv(path: Path) -> list[FrameRow]:
             raise DatasetError(f"expected 2 comma-separated values (timestamp [ns], filename), got {len(fields)}", path, number)
         if not fields[0].isdigit():
             raise DatasetError(f"expected an integer timestamp in ns, got {fields[0]!r}", path, number)
-        ns = int(fields[0])
-        if rows and ns <= rows[-1].ns:
-            raise DatasetError(f"timestamp {ns} ns does not increase (previous row: {rows[-1].ns} ns)", path, number)
-        rows.append(FrameRow(number, ns, folder / fields[1]))
+        rows.append(FrameRow(number, int(fields[0]), folder / fields[1]))
+    check_times(((row.line, row.ns) for row in rows), path, unit="ns")
     return rows
 
 

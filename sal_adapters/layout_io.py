@@ -31,7 +31,7 @@ import yaml
 from sal_adapters.camera import Camera
 from sal_adapters.errors import DatasetError
 from sal_adapters.sequence import Frame
-from sal_adapters.textfiles import atomic_write_text, format_float, read_rows
+from sal_adapters.textfiles import atomic_write_text, check_times, format_float, read_rows
 
 __all__ = [
     "CAMERA_FILE",
@@ -188,10 +188,9 @@ def select_camera(
 def read_list(path: Path, pattern: str, what: str, increasing: bool = True) -> list[tuple[int, list[float | str]]]:
     """Rows of a list file as ``(line number, values)``; ``pattern`` gives each column, ``t`` a
     time (s, float) and ``f`` a file name (``"tf"`` for TUM ``rgb.txt``). With ``increasing``,
-    times in the first column must increase strictly. ``what`` describes a line for messages
-    (``"timestamp filename"``)."""
+    times in the first column must increase strictly. Every time must be finite (``check_times``).
+    ``what`` describes a line for messages (``"timestamp filename"``)."""
     rows: list[tuple[int, list[float | str]]] = []
-    previous: float | None = None
     for number, fields in read_rows(path):
         if len(fields) != len(pattern):
             raise DatasetError(f"expected {len(pattern)} fields '{what}', got {len(fields)}: {' '.join(fields)!r}", path, number)
@@ -199,21 +198,17 @@ def read_list(path: Path, pattern: str, what: str, increasing: bool = True) -> l
         for kind, field in zip(pattern, fields):
             if kind == "t":
                 try:
-                    t = float(field)
+                    values.append(float(field))
                 except ValueError:
-                    t = float("nan")
-                if not np.isfinite(t):
-                    raise DatasetError(f"expected a timestamp in seconds, got {field!r}", path, number)
-                values.append(t)
+                    raise DatasetError(f"expected a timestamp in seconds, got {field!r}", path, number) from None
             else:
                 values.append(field)
-        t0 = float(values[0]) if pattern[0] == "t" else None
-        if increasing and t0 is not None and previous is not None and t0 <= previous:
-            raise DatasetError(f"timestamp {fields[0]} is not after the previous line's {format_float(previous)}", path, number)
-        previous = t0
         rows.append((number, values))
     if not rows:
         raise DatasetError(f"no lines '{what}' found", path)
+    for column, kind in enumerate(pattern):
+        if kind == "t":
+            check_times(((number, float(values[column])) for number, values in rows), path, increasing=increasing and column == 0)
     return rows
 
 

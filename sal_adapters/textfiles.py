@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -12,7 +13,7 @@ import numpy as np
 from sal_adapters.atomic import staged_file
 from sal_adapters.errors import DatasetError
 
-__all__ = ["read_text", "read_rows", "read_numeric_table", "atomic_write", "atomic_write_text", "format_float"]
+__all__ = ["read_text", "read_rows", "read_numeric_table", "check_times", "atomic_write", "atomic_write_text", "format_float"]
 
 
 def read_text(path: Path, what: str = "file") -> str:
@@ -80,6 +81,46 @@ def _is_float(text: str) -> bool:
     except ValueError:
         return False
     return True
+
+
+def check_times(rows: Iterable[tuple[int, float]], path: Path, unit: str = "s", increasing: bool = True) -> None:
+    """Check the ``(line number, time)`` rows of a frame list when a dataset is opened.
+
+    Every time must be finite; with ``increasing`` each must come strictly after the previous
+    row's, by a step that gives a frame rate (``1 / step``, Hz) that is a finite positive number,
+    so that any two frames give a positive period. ``unit`` is the times' unit (``s`` or ``ns``)
+    for messages. The first offending row raises ``DatasetError`` naming the file and line:
+    ``times.txt:5: time 0.3 s is not after line 4's 0.4 s (frame times must increase)``.
+    """
+    previous: tuple[int, float] | None = None
+    for number, t in rows:
+        if not _finite(t):
+            problem = "is too large" if isinstance(t, int) else "is not a finite number"
+            raise DatasetError(f"time {_shown(t)} {unit} {problem}", path, number)
+        if increasing and previous is not None:
+            line, before = previous
+            if not t > before:
+                raise DatasetError(f"time {_shown(t)} {unit} is not after line {line}'s {_shown(before)} {unit} (frame times must increase)", path, number)
+            step = t - before
+            if not (_finite(step) and _finite(1.0 / step)):
+                raise DatasetError(
+                    f"time {_shown(t)} {unit} is {_shown(step)} {unit} after line {line}'s: no usable frame period", path, number
+                )
+        previous = (number, t)
+
+
+def _finite(value: float) -> bool:
+    """``math.isfinite``, with ``False`` for an integer too large for a float."""
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
+
+
+def _shown(value: float) -> str:
+    """A time as in messages: integers exactly (at most 40 characters), floats as ``format_float``."""
+    text = str(value) if isinstance(value, int) else format_float(value)
+    return text if len(text) <= 40 else f"{text[:20]}...({len(text)} digits)"
 
 
 def format_float(value: float) -> str:

@@ -18,6 +18,7 @@ from scipy.spatial.transform import Rotation
 from sal_adapters.errors import DatasetError
 from sal_adapters.textfiles import (
     atomic_write_text,
+    check_times,
     format_float,
     read_numeric_table,
     read_rows,
@@ -221,8 +222,10 @@ def seconds_to_ns(seconds: float) -> int:
 
 
 def read_times(source: str | Path) -> np.ndarray:
-    """Read a KITTI-style ``times.txt``: one time in seconds per line."""
-    table, _ = read_numeric_table(Path(source), 1, what="number (time in seconds)")
+    """Read a KITTI-style ``times.txt``: one time in seconds per line, finite and increasing
+    (``check_times``)."""
+    table, lines = read_numeric_table(Path(source), 1, what="number (time in seconds)")
+    check_times(zip(lines, table[:, 0].tolist()), Path(source))
     return table[:, 0]
 
 

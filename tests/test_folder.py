@@ -211,7 +211,7 @@ def test_errors(tmp_path: Path) -> None:
     [
         ("0.0\n0.1\n0.2\n", None, "3 timestamps for 2 images"),
         ("0.0\nzero\n", 2, "expected a timestamp in seconds, got 'zero'"),
-        ("0.0\n0.0\n", 2, "timestamp 0.0 is not after the previous line's 0.0"),
+        ("0.0\n0.0\n", 2, "time 0.0 s is not after line 1's 0.0 s (frame times must increase)"),
         ("0.0 a.png\n0.1\n", 2, "expected 2 fields 'timestamp filename', got 1"),
         ("# t name\n0.0 a.png\n0.1 c.png\n", 3, "listed image c.png not found"),
         ("0.0 a.png extra\n", 1, "expected 'timestamp' or 'timestamp filename' per line, got 3 fields"),

@@ -311,7 +311,7 @@ def test_stereo_is_refused(tmp_path: Path) -> None:
     [
         ("1305031102.3", "expected 2 fields 'timestamp filename', got 1"),
         ("abc rgb/x.png", "expected a timestamp in seconds, got 'abc'"),
-        ("1305031102.1 rgb/x.png", "timestamp 1305031102.1 is not after the previous line's"),
+        ("1305031102.1 rgb/x.png", "time 1305031102.1 s is not after line 3's"),
     ],
 )
 def test_malformed_rgb_txt_names_file_and_line(tmp_path: Path, line: str, message: str) -> None:

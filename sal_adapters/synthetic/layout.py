@@ -24,7 +24,7 @@ from sal_adapters.camera import Camera
 from sal_adapters.errors import DatasetError
 from sal_adapters.images import write_depth, write_image
 from sal_adapters.sequence import SENSORS, Frame, FrameRecord, Sequence
-from sal_adapters.textfiles import atomic_write_text, format_float, read_rows
+from sal_adapters.textfiles import atomic_write_text, check_times, format_float, read_rows
 from sal_adapters.trajectory import Trajectory
 
 __all__ = ["METADATA", "TIMES", "GROUNDTRUTH", "LEFT", "RIGHT", "DEPTH", "FrameRow", "write_metadata", "read_metadata", "read_times", "write_layout", "read_layout"]
@@ -100,6 +100,7 @@ def read_times(path: Path) -> list[tuple[int, FrameRow]]:
         rows.append((number, row))
     if not rows:
         raise DatasetError("no frames listed", path)
+    check_times(((number, row.timestamp) for number, row in rows), path)
     return rows
 
 
