@@ -62,6 +62,7 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 from pytest_sal.cache_keys import CacheError
+from sal_adapters.errors import CacheWarning
 from sal_adapters.file_lock import FileLock
 
 __all__ = [
@@ -89,10 +90,6 @@ _READ_ONLY = frozenset({errno.EACCES, errno.EPERM, errno.EROFS})
 
 #: What is wrong with a stored dict, in words, or ``None`` (``ContentCache.compute``'s ``check``).
 EntryCheck = Callable[[dict[str, Any]], str | None]
-
-
-class CacheWarning(UserWarning):
-    """A bad cache entry was discarded (it is computed again), or the cache is read-only."""
 
 
 # --------------------------------------------------------------------------------------- keys

@@ -2,14 +2,16 @@
 
 ``SalError`` is the one root: the plugin and the ``sal`` command catch it and print its
 message without a traceback. ``DatasetError`` names the file (and line) that is wrong;
-``WriteError`` the file or folder that could not be written.
+``WriteError`` the file or folder that could not be written. ``CacheWarning`` says that a
+damaged cache entry (a stored frame of the synthetic world, a trial result) was discarded and
+computed again, or that a cache is read-only.
 """
 
 from __future__ import annotations
 
 from os import PathLike
 
-__all__ = ["SalError", "DatasetError", "DatasetWarning", "WriteError"]
+__all__ = ["SalError", "DatasetError", "DatasetWarning", "CacheWarning", "WriteError"]
 
 
 class SalError(Exception):
@@ -26,6 +28,7 @@ class DatasetError(SalError, ValueError):
     def __init__(self, message: str, path: str | PathLike[str] | None = None, line: int | None = None):
         self.path = None if path is None else str(path)
         self.line = line
+        self.problem = message  # what is wrong, without the file and line
         where = ""
         if self.path is not None:
             where = f"{self.path}:{line}: " if line is not None else f"{self.path}: "
@@ -46,3 +49,7 @@ class WriteError(SalError, OSError):
 
 class DatasetWarning(UserWarning):
     """Something in a dataset was skipped or guessed (a missing image, assumed intrinsics)."""
+
+
+class CacheWarning(UserWarning):
+    """A bad cache entry was discarded (it is computed again), or the cache is read-only."""
