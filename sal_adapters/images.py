@@ -39,17 +39,19 @@ def probe_image(path: Path) -> tuple[int, int, bool]:
 def read_depth(path: Path, depth_scale: float | None) -> np.ndarray:
     """Decode a depth map to float32 metres (0 = invalid).
 
-    ``.npy`` files hold metres already; 16-bit images hold ``metres * depth_scale``
+    ``.npy`` files hold metres already (floats, 2-D); 16-bit images hold ``metres * depth_scale``
     (TUM: 5000).
     """
     path = Path(path)
     if path.suffix == ".npy":
         try:
             depth = np.load(path, allow_pickle=False)
-        except (OSError, ValueError) as exc:
+        except (OSError, ValueError, EOFError) as exc:  # EOFError: an empty file
             raise DatasetError(f"cannot read depth array ({exc})", path) from None
         if depth.ndim != 2:
             raise DatasetError(f"depth array must be 2-D, got shape {depth.shape}", path)
+        if not np.issubdtype(depth.dtype, np.floating):
+            raise DatasetError(f"depth array must hold floats (m), got {depth.dtype}", path)
         return depth.astype(np.float32, copy=False)
     raw = _imread(path, cv2.IMREAD_UNCHANGED)
     if raw.ndim != 2:

@@ -4,19 +4,23 @@ Opening renders nothing: each frame's image, right image and depth sources load 
 from the cache folder or render the frame, writing every file that rendering produced
 (left view: image and depth; right view: image). Files are written through uniquely named
 temporary files and ``os.replace``, so processes rendering the same frame at the same time
-only ever see complete files. Opened inside ``no_cache_writes()`` (``sal perturb --dry-run``),
-a sequence reads what the folder holds and renders the rest in memory, storing nothing.
+only ever see complete files. A stored file that cannot be read or decoded, or is not the array
+a render gives (its size; floats for depth), is discarded with one ``CacheWarning`` naming it:
+the frame is rendered again and the file replaced, identical to a fresh render. Opened inside
+``no_cache_writes()`` (``sal perturb --dry-run``), a sequence reads what the folder holds and
+renders the rest (and any bad file) in memory, storing nothing.
 """
 
 from __future__ import annotations
 
+import warnings
 from functools import partial
 from pathlib import Path
 
 import numpy as np
 
 from sal_adapters.cache_dir import cache_writes_allowed, user_cache_dir
-from sal_adapters.errors import DatasetError
+from sal_adapters.errors import CacheWarning, DatasetError
 from sal_adapters.images import read_depth, read_image, write_depth, write_image
 from sal_adapters.sequence import FrameRecord, Sequence
 from sal_adapters.synthetic.layout import (
@@ -48,36 +52,63 @@ def frame_stem(index: int) -> str:
 
 
 class FrameStore:
-    """Frames of ``world`` in ``folder``: read when present, rendered otherwise (and stored
-    there unless ``store`` is false)."""
+    """Frames of ``world`` in ``folder``: read when present and sound, rendered otherwise (and
+    stored there unless ``store`` is false)."""
 
     def __init__(self, world: World, folder: Path, store: bool = True):
         self.world = world
         self.folder = Path(folder)
         self.store = store
+        self._warned: set[Path] = set()  # bad files already said (warned once each)
 
     def _path(self, stream: str, index: int) -> Path:
         return self.folder / stream / f"{frame_stem(index)}{'.npy' if stream == DEPTH else '.png'}"
 
     def left(self, index: int) -> np.ndarray:
         """Left RGB image of frame ``index``."""
-        path = self._path(LEFT, index)
-        return read_image(path) if path.is_file() else self._render_left(index)[0]
+        stored = self._stored(LEFT, index)
+        return stored if stored is not None else self._render_left(index)[0]
 
     def depth(self, index: int) -> np.ndarray:
         """Left z-depth (float32 m, 0 = sky) of frame ``index``."""
-        path = self._path(DEPTH, index)
-        return read_depth(path, None) if path.is_file() else self._render_left(index)[1]
+        stored = self._stored(DEPTH, index)
+        return stored if stored is not None else self._render_left(index)[1]
 
     def right(self, index: int) -> np.ndarray:
         """Right RGB image of frame ``index``."""
-        path = self._path(RIGHT, index)
-        if path.is_file():
-            return read_image(path)
+        stored = self._stored(RIGHT, index)
+        if stored is not None:
+            return stored
         rgb, _ = self.world.render(index, right=True)
         if self.store:
-            write_image(path, rgb)
+            write_image(self._path(RIGHT, index), rgb)
         return rgb
+
+    def _stored(self, stream: str, index: int) -> np.ndarray | None:
+        """The stored ``stream`` file of frame ``index``; ``None`` when there is none, or when it
+        cannot be read or is not the array a render gives (HxWx3 uint8 RGB, HxW float32 depth):
+        then one ``CacheWarning`` names it, and the caller renders the frame again."""
+        path = self._path(stream, index)
+        if not path.is_file():
+            return None
+        width, height = self.world.intrinsics[4:]
+        expected = (height, width) if stream == DEPTH else (height, width, 3)
+        try:
+            data = read_depth(path, None) if stream == DEPTH else read_image(path)
+            if data.shape != expected:
+                raise DatasetError(f"holds an array of shape {data.shape}, a render gives {expected}", path)
+        except (DatasetError, OSError) as exc:  # OSError: a file this user may not read
+            self._discard(path, exc.problem if isinstance(exc, DatasetError) else exc.strerror or str(exc))
+            return None
+        return data
+
+    def _discard(self, path: Path, problem: str) -> None:
+        """Say once that the stored file ``path`` is bad; rendering again replaces it (when storing)."""
+        if path in self._warned:
+            return
+        self._warned.add(path)
+        done = "replaced by a fresh render" if self.store else "ignored (nothing is stored) and rendered again"
+        warnings.warn(CacheWarning(f"{path}: bad cached frame, {done}: {problem}"), stacklevel=4)
 
     def _render_left(self, index: int) -> tuple[np.ndarray, np.ndarray]:
         """Render the left view and store both of its files."""
