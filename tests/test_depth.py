@@ -21,6 +21,7 @@ import pytest
 from onnx_models import depth_model
 
 from sal_adapters import DatasetWarning, Sequence, open_dataset
+from sal_adapters.errors import CacheWarning
 from sal_adapters.camera import Camera
 from sal_adapters.images import read_image
 from sal_adapters.sequence import FrameRecord
@@ -423,6 +424,35 @@ def test_depth_computed_once_and_cached(tmp_path, monkeypatch):
     for changed in ({"min_depth_m": 3.0}, {"block_size": 7}, {"mode": "sgbm"}, {"uniqueness": 15}, {"speckle_window": 50}, {"speckle_range": 1}, {"min_texture": 2.0}):
         assert StereoDepth(**changed).key(seq) != base, changed
     assert StereoDepth().key(synthetic("indoor")) != base  # and so does the sequence
+
+
+@pytest.mark.parametrize(
+    "damage, problem",
+    [
+        (lambda path: path.write_bytes(path.read_bytes()[:100]), "cannot read depth array"),
+        (lambda path: path.write_bytes(b""), "cannot read depth array"),
+        (lambda path: path.write_bytes(os.urandom(4000)), "cannot read depth array"),
+        (lambda path: np.save(path, np.zeros((4, 4), np.float32)), "depth array of shape (4, 4), the frames are"),
+        (lambda path: np.save(path, np.zeros((4, 4), np.int32)), "depth array must hold floats (m), got int32"),
+    ],
+    ids=["truncated", "empty", "garbage", "wrong-shape", "integers"],
+)
+def test_damaged_cached_depth_is_computed_again(tmp_path, damage, problem):
+    """A damaged depth file in the cache is not an error on every later run (issue 12): one
+    CacheWarning names it, the depth is computed again and the file replaced."""
+    seq = synthetic("urban")
+    provider = StereoDepth()
+    index = seq[1].index
+    first = provider.lookup(seq, cache_dir=tmp_path)(index, "left")
+    stored = tmp_path / "depth" / provider.key(seq) / f"{index}_left.npy"
+    clean = stored.read_bytes()
+    damage(stored)
+    with pytest.warns(CacheWarning) as caught:
+        again = provider.lookup(seq, cache_dir=tmp_path)(index, "left")
+    assert [str(w.message).split(": bad cached depth, computed again and replaced: ")[0] for w in caught] == [str(stored)]
+    assert problem in str(caught[0].message)
+    np.testing.assert_array_equal(again, first)
+    assert stored.read_bytes() == clean
 
 
 def test_native_right_depth_is_the_left_depth_seen_from_the_right_camera() -> None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import warnings
 from abc import ABC, abstractmethod
 from collections import OrderedDict
 from pathlib import Path
@@ -18,6 +19,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from sal_adapters.cache_dir import cache_writes_allowed, user_cache_dir
+from sal_adapters.errors import CacheWarning, DatasetError
 from sal_adapters.images import read_depth, write_depth
 from sal_adapters.sequence import Sequence
 from sal_modules.base import DepthLookup
@@ -71,7 +73,9 @@ class CachedDepth:
 
     Disk entries live in ``<cache>/depth/<key>/<index>_<stream>.npy`` and are written
     atomically, so concurrent processes computing the same frame never see a partial file;
-    none is written when the lookup was made inside ``no_cache_writes()``.
+    none is written when the lookup was made inside ``no_cache_writes()``. A stored file that
+    cannot be read or is not an image-sized float map is computed again and replaced, with one
+    ``CacheWarning`` naming it.
     """
 
     def __init__(self, provider: DepthProvider, sequence: Sequence, cache_dir: Path | None = None, keep: int = 4):
@@ -102,11 +106,30 @@ class CachedDepth:
         if not self.provider.caches(stream):
             return self.provider.compute(self.sequence, position, stream)
         path = self.folder / f"{index}_{stream}.npy"
-        if path.is_file():
-            return read_depth(path, None)
+        stored = self._stored(path)
+        if stored is not None:
+            return stored
         depth = np.ascontiguousarray(self.provider.compute(self.sequence, position, stream), dtype=np.float32)
         if self._store:
             write_depth(path, depth, None)
+        return depth
+
+
+    def _stored(self, path: Path) -> np.ndarray | None:
+        """The stored depth at ``path``; ``None`` when there is none, or when it is damaged
+        (then one warning names it and the caller computes it again)."""
+        if not path.is_file():
+            return None
+        camera = self.sequence.camera
+        try:
+            depth = read_depth(path, None)
+            if depth.shape != (camera.height, camera.width):
+                raise DatasetError(f"depth array of shape {depth.shape}, the frames are {camera.height}x{camera.width} px", path)
+        except (DatasetError, OSError) as exc:  # OSError: a file this user may not read
+            problem = exc.problem if isinstance(exc, DatasetError) else exc.strerror or str(exc)
+            done = "computed again and replaced" if self._store else "computed again (nothing is stored)"
+            warnings.warn(CacheWarning(f"{path}: bad cached depth, {done}: {problem}"), stacklevel=4)
+            return None
         return depth
 
 
