@@ -14,18 +14,23 @@ The schema is the paper's (``experiment``, ``dataset``, ``perturbations`` with `
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import reprlib
-from collections.abc import Mapping
+import types
+import typing
+from collections.abc import Callable, Hashable, Mapping
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import yaml
 
 from sal_adapters import DATASETS, SalError, Sequence, open_dataset
+from sal_adapters.datasets import DatasetKind
+from sal_adapters.plugins import EntryPointRegistry, PluginError
 from sal_modules import (
     PERTURBATIONS,
     Composite,
@@ -51,6 +56,8 @@ __all__ = [
     "parse_config",
     "perturbed_sequences",
 ]
+
+T = TypeVar("T")
 
 #: name of the clean sequence in every output tree (a perturbation of another type may not take it)
 BASELINE = "baseline"
@@ -180,11 +187,22 @@ class _UniqueKeyLoader(yaml.SafeLoader):
         finally:
             self.depth -= 1
 
+    def construct_object(self, node: yaml.Node, deep: bool = False) -> Any:
+        """A value YAML cannot make (``2001-02-30``, ``!!int x``, 5000 digits) is a
+        ``ConstructorError`` naming its line, not the ``ValueError`` of its constructor."""
+        try:
+            return super().construct_object(node, deep=deep)
+        except (ValueError, TypeError, KeyError, AttributeError, OverflowError):
+            tag = node.tag.rsplit(":", 1)[-1]
+            raise yaml.constructor.ConstructorError(None, None, f"{_quote(node.value)} is not a valid {tag} value", node.start_mark) from None
+
 
 def _construct_mapping(loader: yaml.SafeLoader, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
     seen: dict[Any, int] = {}
     for key_node, _ in node.value:
         key = loader.construct_object(key_node, deep=deep)
+        if not isinstance(key, Hashable):
+            raise yaml.constructor.ConstructorError(None, None, f"a key cannot be {_type_name(key)}", key_node.start_mark)
         if key in seen:
             raise yaml.constructor.ConstructorError(
                 None, None, f"key {_quote(key)} appears twice (first on line {seen[key] + 1})", key_node.start_mark
@@ -197,14 +215,23 @@ _UniqueKeyLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG,
 
 #: Limits a config is checked against before anything is built: the file's size, how deep
 #: mappings and lists nest, the values it holds once YAML aliases are expanded (a "billion
-#: laughs" alias chain holds 10^9), the perturbations and the frames of a dataset.
+#: laughs" alias chain holds 10^9), the perturbation modules (each composite step counts; a dry
+#: run sets each up on the first frame) and the frames of a dataset.
 MAX_CONFIG_BYTES = 1_000_000
 MAX_DEPTH = 32
 MAX_VALUES = 100_000
 MAX_PERTURBATIONS = 256
 MAX_FRAMES = 1_000_000
-#: Characters of a value quoted in an error message.
+#: Frames the synthetic world renders (``dataset.options.frames``): opening it computes every pose.
+MAX_RENDERED_FRAMES = 10_000
+#: Bytes of a path a config names, and of one file or folder name in it (Linux PATH_MAX, NAME_MAX).
+MAX_PATH_BYTES = 4096
+MAX_NAME_BYTES = 255
+#: Characters of a value quoted in an error message, and of a key or a name that names nothing known.
 QUOTE_CHARS = 80
+NAME_CHARS = 40
+#: Trials of a boundary search (bisection: 64 halvings reach a double's precision).
+MAX_SEARCH_TRIALS = 100
 
 
 class _TooBig(Exception):
@@ -243,10 +270,24 @@ def _check_size(node: yaml.Node) -> None:
     count(node, 0)
 
 
-def _quote(value: Any) -> str:
-    """``repr(value)``, cut to ``QUOTE_CHARS`` characters (errors quote, they do not dump)."""
+def _quote(value: Any, limit: int = QUOTE_CHARS) -> str:
+    """``repr(value)``, cut to ``limit`` characters (errors quote, they do not dump)."""
     text = reprlib.repr(value) if isinstance(value, (dict, list, tuple, set)) else repr(value)
-    return text if len(text) <= QUOTE_CHARS else text[: QUOTE_CHARS - 3] + "..."
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+_KEY = re.compile(r"[A-Za-z0-9_.-]{1,%d}" % NAME_CHARS)
+
+
+def _key(key: Any) -> str:
+    """A key of the config as its path shows it: a plain word as it is, anything else quoted."""
+    return key if isinstance(key, str) and _KEY.fullmatch(key) else _quote(key, NAME_CHARS)
+
+
+def _one_line(text: str, limit: int = 2 * QUOTE_CHARS) -> str:
+    """``text`` as one printable line (other characters escaped) of at most ``limit`` characters."""
+    text = "".join(c if c.isprintable() else repr(c)[1:-1] for c in text[:limit])
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def load_config(path: str | os.PathLike[str]) -> ExperimentConfig:
@@ -278,11 +319,14 @@ def parse_config(text: str, source: str = "<config>") -> ExperimentConfig:
         raise ConfigError(f"{source}{exc.where}", "", str(exc)) from None
     except RecursionError:
         raise ConfigError(source, "", f"nested deeper than {MAX_DEPTH} levels; a config needs a few") from None
+    except yaml.reader.ReaderError as exc:  # str() of it is three lines
+        line = text.count("\n", 0, exc.position) + 1
+        raise ConfigError(f"{source}:{line}", "", f"YAML syntax error: character #x{exc.character:04x} is not allowed ({exc.reason})") from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
         line = f":{mark.line + 1}" if mark is not None else ""
         problem = getattr(exc, "problem", None) or str(exc)
-        raise ConfigError(f"{source}{line}", "", f"YAML syntax error: {problem}") from None
+        raise ConfigError(f"{source}{line}", "", f"YAML syntax error: {_one_line(problem)}") from None
     return _Parser(source).config(data, text)
 
 
@@ -296,6 +340,61 @@ def _type_name(value: Any) -> str:
 
 def _is_number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _is_finite(value: Any) -> bool:
+    """A number, not NaN nor infinite (nor an integer too large for a float)."""
+    try:
+        return _is_number(value) and math.isfinite(value)
+    except OverflowError:  # an integer beyond any float
+        return False
+
+
+#: What a dataset option annotated with each type takes from YAML: (words, check).
+_OPTION_TYPES: dict[Any, tuple[str, Callable[[Any], bool]]] = {
+    type(None): ("null", lambda v: v is None),
+    bool: ("true or false", lambda v: isinstance(v, bool)),
+    int: ("an integer", lambda v: isinstance(v, int) and not isinstance(v, bool)),
+    float: ("a number", _is_finite),
+    str: ("a string", lambda v: isinstance(v, str)),
+    Path: ("a path", lambda v: isinstance(v, str)),
+}
+
+
+def _alternatives(hint: Any) -> tuple[Any, ...]:
+    """The types of the annotation ``hint`` (``str | None``: ``str``, ``NoneType``)."""
+    return typing.get_args(hint) if isinstance(hint, types.UnionType) or typing.get_origin(hint) is typing.Union else (hint,)
+
+
+def _option_types(hint: Any) -> list[tuple[str, Callable[[Any], bool]]] | None:
+    """(words, check) of each type an option annotated ``hint`` may be (``tuple[float, ...]``:
+    a list of numbers), or ``None`` for an annotation not known here."""
+    found = []
+    alternatives = _alternatives(hint)
+    for alt in alternatives:
+        items = typing.get_args(alt) if typing.get_origin(alt) is tuple else ()
+        if alt is str and Path in alternatives:
+            continue
+        if alt in _OPTION_TYPES:
+            found.append(_OPTION_TYPES[alt])
+        elif items and set(items) <= {int, float, Ellipsis}:
+            n = None if Ellipsis in items else len(items)
+
+            def numbers(v: Any, n: int | None = n) -> bool:
+                return isinstance(v, list) and n in (None, len(v)) and all(_is_finite(x) for x in v)
+
+            found.append((f"a list of {n or 'some'} numbers", numbers))
+        else:
+            return None
+    return found
+
+
+def _option_hints(kind: DatasetKind) -> dict[str, Any]:
+    """The annotations of the options of a dataset kind (none where they cannot be read)."""
+    try:
+        return typing.get_type_hints(kind.open)
+    except Exception:  # a plug-in's annotation naming what its module does not import
+        return {}
 
 
 class _Parser:
@@ -312,7 +411,7 @@ class _Parser:
         prefix = f"{where}." if where else ""
         for key in value:
             if key not in known:
-                raise self.error(f"{prefix}{key}", f"unknown key; known: {', '.join(known)}")
+                raise self.error(f"{prefix}{_key(key)}", f"unknown key; known: {', '.join(known)}")
         for key in required:
             if value.get(key) is None:
                 raise self.error(f"{prefix}{key}", "is required")
@@ -338,12 +437,71 @@ class _Parser:
             raise self.error(where, f"{_quote(value)} is not valid; must be {words}")
         return float(value) if kind == "number" else value
 
+    def search_trials(self, value: Any, where: str) -> int:
+        """A number of boundary search trials, 1 .. ``MAX_SEARCH_TRIALS``."""
+        trials = self.typed(value, where, "int", minimum=1)
+        if trials > MAX_SEARCH_TRIALS:
+            raise self.error(where, f"{trials} is not valid; the limit is {MAX_SEARCH_TRIALS} trials")
+        return trials
+
     def frame_count(self, value: Any, where: str) -> int | None:
         """An optional frame count, 1 .. ``MAX_FRAMES``."""
         count = self.typed(value, where, "int", optional=True, minimum=1)
         if count is not None and count > MAX_FRAMES:
             raise self.error(where, f"{count} is not valid; the limit is {MAX_FRAMES} frames")
         return count
+
+    def path(self, value: Any, where: str, *, optional: bool = False) -> str | None:
+        """A path-valued key (every one is checked by ``checked_path``): a string a file system
+        can take, with no NUL character, at most ``MAX_PATH_BYTES`` long and ``MAX_NAME_BYTES``
+        per name."""
+        text = self.typed(value, where, "str", optional=optional)
+        return None if text is None else self.checked_path(text, where)
+
+    def checked_path(self, text: str, where: str) -> str:
+        """``text``, refused if it cannot be a path (see ``path``)."""
+        if "\0" in text:
+            raise self.error(where, f"contains a NUL character ({_quote(text)}); no path can hold one")
+        try:
+            encoded = os.fsencode(text)
+        except UnicodeEncodeError:
+            raise self.error(where, f"{_quote(text)} holds a character no file name can hold here") from None
+        longest = max(encoded.split(b"/"), key=len)
+        if len(encoded) > MAX_PATH_BYTES or len(longest) > MAX_NAME_BYTES:
+            raise self.error(
+                where,
+                f"{_quote(text)} is too long ({len(encoded)} bytes, a name of {len(longest)}); "
+                f"a path may have at most {MAX_PATH_BYTES} bytes and each name in it {MAX_NAME_BYTES}",
+            )
+        return text
+
+    def folder(self, value: Any, where: str) -> Path:
+        """A path-valued key with ``$VARIABLES`` and ``~`` expanded, then checked."""
+        text = self.typed(value, where, "str")
+        return Path(self.checked_path(os.path.expanduser(os.path.expandvars(text)), where))
+
+    def option(self, value: Any, where: str, hint: Any) -> None:
+        """A dataset option checked against its annotation in the dataset kind's ``open``
+        (a value of an annotation ``_option_types`` does not know is left to the kind)."""
+        allowed = _option_types(hint)
+        if allowed is None:
+            return
+        if not any(fits(value) for _, fits in allowed):
+            words = [w for w, _ in allowed]
+            raise self.error(where, f"{_quote(value)} is not valid; must be {', '.join(words[:-1]) + ' or ' if len(words) > 1 else ''}{words[-1]}")
+        if isinstance(value, str) and Path in _alternatives(hint):
+            self.checked_path(value, where)
+
+    def registered(self, registry: EntryPointRegistry[T], name: str, where: str, known: tuple[str, ...] = (), hidden: tuple[str, ...] = ()) -> T:
+        """The entry ``name`` of ``registry``. Only an error lists the names (``known`` first,
+        not ``hidden``): listing reads the entry points of every installed package."""
+        try:
+            return registry.get(name)
+        except PluginError as exc:
+            names = [n for n in registry.names() if n not in hidden]
+            if name in names:  # installed, but it cannot be loaded
+                raise self.error(where, _one_line(str(exc), 3 * QUOTE_CHARS)) from None
+            raise self.error(where, f"unknown {registry.what} {_quote(name, NAME_CHARS)}; known: {', '.join([*known, *names])}") from None
 
     def safe_name(self, value: Any, where: str) -> str:
         self.typed(value, where, "str")
@@ -378,32 +536,34 @@ class _Parser:
     def dataset(self, value: Any) -> DatasetConfig:
         d = self.mapping(value, "dataset", _DATASET, required=("type",))
         kind = self.typed(d["type"], "dataset.type", "str")
-        names = DATASETS.names()
-        if kind not in names:
-            raise self.error("dataset.type", f"unknown dataset kind {_quote(kind)}; known: {', '.join(names)}")
-        allowed = DATASETS.get(kind).option_names()
-        path = self.typed(d.get("path"), "dataset.path", "str", optional=True)
-        folder = None
-        if path is not None:
-            folder = Path(os.path.expandvars(path)).expanduser()
-            if not folder.is_dir():
-                what = "is not a folder" if folder.exists() else "does not exist"
-                raise self.error("dataset.path", f"{str(folder)!r} {what}; give the dataset folder")
+        dataset_kind = self.registered(DATASETS, kind, "dataset.type")
+        allowed = dataset_kind.option_names()
+        folder = None if d.get("path") is None else self.folder(d["path"], "dataset.path")
+        if folder is not None:
+            try:
+                found = "" if folder.is_dir() else "is not a folder" if folder.exists() else "does not exist"
+            except OSError as exc:  # stat refused (a folder above is unreadable)
+                found = f"cannot be read ({exc.strerror})"
+            if found:
+                raise self.error("dataset.path", f"{_quote(str(folder))} {found}; give the dataset folder")
         elif kind != "synthetic":
             raise self.error("dataset.path", f"is required for dataset kind {_quote(kind)}")
         sequence = d.get("sequence")
-        if _is_number(sequence) and kind == "kitti":
+        if kind == "kitti" and (type(sequence) is int or isinstance(sequence, float) and sequence.is_integer()):
             sequence = f"{int(sequence):02d}"
-        sequence = self.typed(sequence, "dataset.sequence", "str", optional=True)
+        sequence = self.path(sequence, "dataset.sequence", optional=True)  # a folder in the dataset
         stereo = self.typed(d.get("stereo", False), "dataset.stereo", "bool")
         options = dict(self.typed(d.get("options") or {}, "dataset.options", "dict"))
-        frames = options.get("frames")
-        if _is_number(frames) and not 1 <= frames <= MAX_FRAMES:
-            raise self.error("dataset.options.frames", f"{_quote(frames)} is not valid; must be a whole number in 1 .. {MAX_FRAMES}")
         for key in options:
             if key not in allowed or key in ("sequence", "stereo"):
                 rest = [a for a in allowed if a not in ("sequence", "stereo")]
-                raise self.error(f"dataset.options.{key}", f"unknown option of dataset kind {_quote(kind)}; known: {', '.join(rest) or 'none'}")
+                raise self.error(f"dataset.options.{_key(key)}", f"unknown option of dataset kind {_quote(kind)}; known: {', '.join(rest) or 'none'}")
+        hints = _option_hints(dataset_kind)
+        for key, value in options.items():
+            self.option(value, f"dataset.options.{key}", hints.get(key))
+        frames = options.get("frames")
+        if _is_number(frames) and not 1 <= frames <= MAX_RENDERED_FRAMES:
+            raise self.error("dataset.options.frames", f"{_quote(frames)} is not valid; must be a whole number in 1 .. {MAX_RENDERED_FRAMES}")
         for key, given in (("sequence", sequence), ("stereo", stereo or None)):
             if given is not None and key not in allowed:
                 raise self.error(f"dataset.{key}", f"dataset kind {_quote(kind)} has no {key} option; its options: {', '.join(allowed) or 'none'}")
@@ -425,6 +585,7 @@ class _Parser:
             raise self.error("perturbations", f"{len(value)} perturbations; the limit is {MAX_PERTURBATIONS} (split the experiment)")
         found: list[PerturbationConfig] = []
         seen: dict[str, int] = {}
+        modules = 0
         for i, item in enumerate(value):
             where = f"perturbations[{i}]"
             d = self.mapping(item, where, _PERTURBATION, required=("name", "type"))
@@ -434,7 +595,7 @@ class _Parser:
             seen[name] = i
             kind = self.typed(d["type"], f"{where}.type", "str")
             if name == BASELINE and kind != "none":
-                raise self.error(f"{where}.name", f"{BASELINE!r} is kept for the clean sequence (type none); rename this {kind} perturbation")
+                raise self.error(f"{where}.name", f"{BASELINE!r} is kept for the clean sequence (type none); rename this {_quote(kind)} perturbation")
             enabled = self.typed(d.get("enabled", True), f"{where}.enabled", "bool")
             params = self.typed(d.get("parameters") or {}, f"{where}.parameters", "dict")
             if kind == "none":
@@ -445,25 +606,29 @@ class _Parser:
                 steps = self.composite(params, f"{where}.parameters")
                 found.append(PerturbationConfig(name, kind, enabled, dict(params), steps))
             else:
-                self.module(kind, params, where)
+                self.module(kind, params, where, known=("none", "composite"))
                 found.append(PerturbationConfig(name, kind, enabled, dict(params)))
+            modules += len(found[-1].modules) or 1
+            if modules > MAX_PERTURBATIONS:
+                raise self.error(where, f"brings the modules to {modules} (composite steps count one each); the limit is {MAX_PERTURBATIONS} (split the experiment)")
         return tuple(found)
 
-    def module(self, kind: str, params: dict[str, Any], where: str) -> Perturbation:
-        names = [n for n in PERTURBATIONS.names() if n != "composite"]
-        if kind not in names:
-            raise self.error(f"{where}.type", f"unknown perturbation module {_quote(kind)}; known: none, composite, {', '.join(names)}")
+    def module(self, kind: str, params: dict[str, Any], where: str, known: tuple[str, ...] = ()) -> Perturbation:
+        """The module ``kind`` with ``params`` (``known``: the other types allowed there)."""
+        self.registered(PERTURBATIONS, kind, f"{where}.type", known, hidden=("composite",))
         cls = module_class(kind)
         specs = cls.parameters()
         for key, value in params.items():
             if key not in specs:
-                raise self.error(f"{where}.parameters.{key}", f"{kind} has no such parameter; parameters: {', '.join(specs) or 'none'}")
+                raise self.error(f"{where}.parameters.{_key(key)}", f"{kind} has no such parameter; parameters: {', '.join(specs) or 'none'}")
             spec = specs[key]
             try:
                 spec.validate(value, kind)
             except ParameterError:
                 shown = f"{_quote(value)}{' ' + spec.unit if spec.unit and _is_number(value) else ''}"
                 raise self.error(f"{where}.parameters.{key}", f"{shown} is not valid; {key} must be {spec.allowed()}") from None
+            if spec.domain == "text":  # a file (night's ONNX model)
+                self.path(value, f"{where}.parameters.{key}", optional=spec.optional)
         try:
             return cls(**params)
         except ParameterError as exc:
@@ -477,6 +642,8 @@ class _Parser:
         modules = self.typed(d["modules"], f"{where}.modules", "list")
         if not modules:
             raise self.error(f"{where}.modules", "must list at least one module")
+        if len(modules) > MAX_PERTURBATIONS:
+            raise self.error(f"{where}.modules", f"{len(modules)} steps; the limit is {MAX_PERTURBATIONS} modules (split the experiment)")
         steps = []
         for j, item in enumerate(modules):
             at = f"{where}.modules[{j}]"
@@ -492,9 +659,8 @@ class _Parser:
 
     def output(self, value: Any) -> OutputConfig:
         d = self.mapping(value if value is not None else {}, "output", _OUTPUT)
-        base = self.typed(d.get("base_dir", "results"), "output.base_dir", "str")
         return OutputConfig(
-            base_dir=Path(os.path.expandvars(base)).expanduser(),
+            base_dir=self.folder(d.get("base_dir", "results"), "output.base_dir"),
             create_timestamp_dir=self.typed(d.get("create_timestamp_dir", False), "output.create_timestamp_dir", "bool"),
         )
 
@@ -557,7 +723,7 @@ class _Parser:
             name=self.safe_name(name, f"{w}.name"),
             module=owner,
             tolerance=tolerance,
-            max_iters=self.typed(d.get("max_iters", 8), f"{w}.max_iters", "int", minimum=1),
+            max_iters=self.search_trials(d.get("max_iters", 8), f"{w}.max_iters"),
             ate_rmse_fail=fail,
             fail_on_tracking_failure=self.typed(d.get("fail_on_tracking_failure", True), f"{w}.fail_on_tracking_failure", "bool"),
         )
@@ -576,8 +742,8 @@ def build_sequence(config: ExperimentConfig) -> Sequence:
         options["stereo"] = True
     try:
         return open_dataset(ds.type, ds.path, start=ds.start, max_frames=ds.max_frames, **options)
-    except SalError as exc:
-        raise ConfigError(config.source, "dataset", str(exc)) from None
+    except SalError as exc:  # cut: a dataset kind may quote a whole option
+        raise ConfigError(config.source, "dataset", _one_line(str(exc), 3 * QUOTE_CHARS)) from None
 
 
 def build_module(pert: PerturbationConfig) -> Perturbation | None:

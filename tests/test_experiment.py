@@ -312,7 +312,7 @@ def test_hostile_configs_end_in_one_short_line_quickly(tmp_path: Path) -> None:
     cases = {
         laughs + valid: "holds more than 100000 values once its YAML aliases are expanded",
         "experiment: " + "[" * 1000 + "]" * 1000 + "\n": "nested deeper than 32 levels",
-        yaml.safe_dump(base_config(tmp_path, dataset={"type": "synthetic", "options": {"frames": 2**63}})): "dataset.options.frames: 9223372036854775808 is not valid; must be a whole number in 1 .. 1000000",
+        yaml.safe_dump(base_config(tmp_path, dataset={"type": "synthetic", "options": {"frames": 2**63}})): "dataset.options.frames: 9223372036854775808 is not valid; must be a whole number in 1 .. 10000",
         yaml.safe_dump(base_config(tmp_path, dataset={"type": "synthetic", "max_frames": 10**9})): "dataset.max_frames: 1000000000 is not valid; the limit is 1000000 frames",
         yaml.safe_dump(base_config(tmp_path, perturbations=[{"name": f"p{i}", "type": "fog"} for i in range(300)])): "perturbations: 300 perturbations; the limit is 256",
         yaml.safe_dump(base_config(tmp_path, experiment={"name": "x" * 100_000})): "experiment.name: 'xxxxxxxx",
@@ -323,3 +323,76 @@ def test_hostile_configs_end_in_one_short_line_quickly(tmp_path: Path) -> None:
         error = error_of(tmp_path, text)
         assert time.perf_counter() - start < 1.0, message
         assert message in error and "\n" not in error and len(error) < 400, error
+
+
+@pytest.mark.parametrize(
+    ("where", "change"),
+    [
+        ("output.base_dir", lambda c: c["output"].update(base_dir="a\0b")),
+        ("dataset.path", lambda c: c.update(dataset={"type": "folder", "path": "data\0/x"})),
+        ("dataset.sequence", lambda c: c.update(dataset={"type": "kitti", "path": ".", "sequence": "0\x007"})),
+        ("dataset.options.cache_dir", lambda c: c["dataset"]["options"].update(cache_dir="\0")),
+        ("dataset.options.timestamps", lambda c: c.update(dataset={"type": "folder", "path": ".", "options": {"timestamps": "t\0.txt"}})),
+        ("dataset.options.groundtruth", lambda c: c.update(dataset={"type": "euroc", "path": ".", "options": {"groundtruth": "gt\0"}})),
+        ("perturbations[0].parameters.model", lambda c: c["perturbations"].insert(0, {"name": "n", "type": "night", "parameters": {"model": "m\0.onnx"}})),
+    ],
+)
+def test_a_nul_character_in_any_path_is_refused_by_its_key(tmp_path: Path, where: str, change: Any) -> None:
+    config = base_config(tmp_path)
+    change(config)
+    message = error_of(tmp_path, config)
+    assert f": {where}: contains a NUL character (" in message and "; no path can hold one" in message, message
+
+
+def test_a_path_too_long_for_the_file_system_is_refused_by_its_key(tmp_path: Path) -> None:
+    config = base_config(tmp_path)
+    config["output"]["base_dir"] = "x" * 300
+    assert "output.base_dir: 'xxx" in error_of(tmp_path, config)
+    assert "is too long (300 bytes, a name of 300); a path may have at most 4096 bytes and each name in it 255" in error_of(tmp_path, config)
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("experiment: " + "1" * 5000 + "\n", "exp.yaml:1: YAML syntax error: '111"),
+        ("experiment: 2001-02-30\n", "exp.yaml:1: YAML syntax error: '2001-02-30' is not a valid timestamp value"),
+        ("experiment: !!float x\n", "exp.yaml:1: YAML syntax error: 'x' is not a valid float value"),
+        ("experiment: !!timestamp x\n", "exp.yaml:1: YAML syntax error: 'x' is not a valid timestamp value"),
+        ("experiment: !!bool maybe\n", "exp.yaml:1: YAML syntax error: 'maybe' is not a valid bool value"),
+        ("experiment:\n  ? [a]\n  : 1\n", "exp.yaml:2: YAML syntax error: a key cannot be a list"),
+        ("experiment:\n  name: \x00\n", "exp.yaml:2: YAML syntax error: character #x0000 is not allowed (special characters are not allowed)"),
+        ("experiment: *" + "a" * 500 + "\n", "exp.yaml:1: YAML syntax error: found undefined alias 'aaa"),
+        ('experiment: {name: e}\ndataset: {type: synthetic}\n"a\\nb\\x1b": 1\n', "exp.yaml: 'a\\nb\\x1b': unknown key; known: experiment,"),
+        ("experiment: {name: e}\ndataset: {type: synthetic, " + "x" * 300 + ": 1}\n", "exp.yaml: dataset.'xxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxx...: unknown key"),
+        ("experiment: {name: e}\ndataset: {type: kitti, path: ., sequence: .inf}\n", "dataset.sequence: inf is not valid; must be a string or null"),
+        ("experiment: {name: e}\ndataset: {type: folder, path: ., options: {fps: [30]}}\n", "dataset.options.fps: [30] is not valid; must be a number or null"),
+        ("experiment: {name: e}\ndataset: {type: folder, path: ., options: {fps: .inf}}\n", "dataset.options.fps: inf is not valid; must be a number or null"),
+        ("experiment: {name: e}\ndataset: {type: synthetic, options: {scene: {a: 1}}}\n", "dataset.options.scene: {'a': 1} is not valid; must be a string"),
+        ("experiment: {name: e}\ndataset: {type: tum, path: ., options: {intrinsics: [1, 2]}}\n", "dataset.options.intrinsics: [1, 2] is not valid; must be a list of 4 numbers, a string or null"),
+        ("experiment: {name: e}\ndataset: {type: synthetic, options: {frames: 1000000}}\n", "dataset.options.frames: 1000000 is not valid; must be a whole number in 1 .. 10000"),
+    ],
+)
+def test_yaml_python_cannot_hold_and_wrong_option_types_are_one_line(tmp_path: Path, text: str, message: str) -> None:
+    error = error_of(tmp_path, text)
+    assert message in error and error.isprintable() and len(error) < 300 + len(str(tmp_path)), error
+
+
+def test_modules_and_search_trials_are_bounded(tmp_path: Path) -> None:
+    config = base_config(tmp_path)
+    config["perturbations"][2]["parameters"]["modules"] *= 200
+    assert "perturbations[2].parameters.modules: 400 steps; the limit is 256 modules (split the experiment)" in error_of(tmp_path, config)
+    config = base_config(tmp_path)
+    config["perturbations"][2]["parameters"]["modules"] *= 127  # 254 steps after rain and fog: 256 modules
+    assert load_config(write(tmp_path, config)).perturbations[2].modules
+    config["perturbations"].append({"name": "more", "type": "fog"})
+    assert "perturbations[3]: brings the modules to 257 (composite steps count one each); the limit is 256" in error_of(tmp_path, config)
+    config = base_config(tmp_path)
+    config["robustness_boundary"]["max_iters"] = 10**100
+    assert "robustness_boundary.max_iters: 1" + "0" * 100 + " is not valid; the limit is 100 trials" in error_of(tmp_path, config)
+
+
+def test_an_unknown_name_is_quoted_short_and_a_step_lists_only_modules(tmp_path: Path) -> None:
+    config = base_config(tmp_path)
+    config["perturbations"][2]["parameters"]["modules"][0]["type"] = "x" * 300
+    message = error_of(tmp_path, config)
+    assert f"modules[0].type: unknown perturbation module '{'x' * 36}...; known: bandwidth, " in message and "none" not in message
