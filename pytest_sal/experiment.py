@@ -17,17 +17,15 @@ from __future__ import annotations
 import math
 import os
 import re
-import reprlib
 import types
 import typing
-from collections.abc import Callable, Hashable, Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
 from typing import Any, TypeVar
 
-import yaml
-
+from pytest_sal.config_yaml import NAME_CHARS, QUOTE_CHARS, ConfigError, key_text, one_line, quote, read_yaml, type_name
 from sal_adapters import DATASETS, SalError, Sequence, open_dataset
 from sal_adapters.datasets import DatasetKind
 from sal_adapters.plugins import EntryPointRegistry, PluginError
@@ -64,15 +62,6 @@ BASELINE = "baseline"
 
 SAFE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,99}")
 SAFE_NAME_TEXT = "1 to 100 letters, digits, '_', '-', '.' (not first)"
-
-
-class ConfigError(SalError, ValueError):
-    """One problem in an experiment config: ``FILE: key.path: message (allowed: ...)``."""
-
-    def __init__(self, source: str, where: str, message: str):
-        self.source = source
-        self.where = where
-        super().__init__(f"{source}: {where}: {message}" if where else f"{source}: {message}")
 
 
 # ------------------------------------------------------------------------------ the schema
@@ -172,54 +161,8 @@ _BOUNDARY = (
 )
 
 
-class _UniqueKeyLoader(yaml.SafeLoader):
-    """SafeLoader that refuses a key given twice in one mapping, and nesting deeper than
-    ``MAX_DEPTH`` while it composes (before Python's recursion limit)."""
-
-    depth = 0
-
-    def compose_node(self, parent: Any, index: Any) -> Any:
-        self.depth += 1
-        try:
-            if self.depth > MAX_DEPTH:
-                raise _TooBig(f":{self.peek_event().start_mark.line + 1}", f"nested deeper than {MAX_DEPTH} levels; a config needs a few")
-            return super().compose_node(parent, index)
-        finally:
-            self.depth -= 1
-
-    def construct_object(self, node: yaml.Node, deep: bool = False) -> Any:
-        """A value YAML cannot make (``2001-02-30``, ``!!int x``, 5000 digits) is a
-        ``ConstructorError`` naming its line, not the ``ValueError`` of its constructor."""
-        try:
-            return super().construct_object(node, deep=deep)
-        except (ValueError, TypeError, KeyError, AttributeError, OverflowError):
-            tag = node.tag.rsplit(":", 1)[-1]
-            raise yaml.constructor.ConstructorError(None, None, f"{_quote(node.value)} is not a valid {tag} value", node.start_mark) from None
-
-
-def _construct_mapping(loader: yaml.SafeLoader, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
-    seen: dict[Any, int] = {}
-    for key_node, _ in node.value:
-        key = loader.construct_object(key_node, deep=deep)
-        if not isinstance(key, Hashable):
-            raise yaml.constructor.ConstructorError(None, None, f"a key cannot be {_type_name(key)}", key_node.start_mark)
-        if key in seen:
-            raise yaml.constructor.ConstructorError(
-                None, None, f"key {_quote(key)} appears twice (first on line {seen[key] + 1})", key_node.start_mark
-            )
-        seen[key] = key_node.start_mark.line
-    return loader.construct_mapping(node, deep=deep)
-
-
-_UniqueKeyLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
-
-#: Limits a config is checked against before anything is built: the file's size, how deep
-#: mappings and lists nest, the values it holds once YAML aliases are expanded (a "billion
-#: laughs" alias chain holds 10^9), the perturbation modules (each composite step counts; a dry
-#: run sets each up on the first frame) and the frames of a dataset.
-MAX_CONFIG_BYTES = 1_000_000
-MAX_DEPTH = 32
-MAX_VALUES = 100_000
+#: Limits of the schema, checked before anything is built: the perturbation modules (each
+#: composite step counts; a dry run sets each up on the first frame) and the frames of a dataset.
 MAX_PERTURBATIONS = 256
 MAX_FRAMES = 1_000_000
 #: Frames the synthetic world renders (``dataset.options.frames``): opening it computes every pose.
@@ -227,67 +170,8 @@ MAX_RENDERED_FRAMES = 10_000
 #: Bytes of a path a config names, and of one file or folder name in it (Linux PATH_MAX, NAME_MAX).
 MAX_PATH_BYTES = 4096
 MAX_NAME_BYTES = 255
-#: Characters of a value quoted in an error message, and of a key or a name that names nothing known.
-QUOTE_CHARS = 80
-NAME_CHARS = 40
 #: Trials of a boundary search (bisection: 64 halvings reach a double's precision).
 MAX_SEARCH_TRIALS = 100
-
-
-class _TooBig(Exception):
-    """A config over one of the limits (``where`` names the line)."""
-
-    def __init__(self, where: str, message: str):
-        super().__init__(message)
-        self.where = where
-
-
-def _check_size(node: yaml.Node) -> None:
-    """Refuse nesting deeper than ``MAX_DEPTH`` and more than ``MAX_VALUES`` values once
-    aliases are expanded, counted on the composed node graph (shared nodes counted once per
-    use, each node visited once)."""
-    expanded: dict[int, int] = {}
-
-    def count(n: yaml.Node, depth: int) -> int:
-        if depth > MAX_DEPTH:
-            raise _TooBig(f":{n.start_mark.line + 1}", f"nested deeper than {MAX_DEPTH} levels; a config needs a few")
-        if id(n) in expanded:
-            return expanded[id(n)]
-        children: list[yaml.Node] = []
-        if isinstance(n, yaml.MappingNode):
-            children = [c for pair in n.value for c in pair]
-        elif isinstance(n, yaml.SequenceNode):
-            children = list(n.value)
-        total = 1 + sum(count(c, depth + 1) for c in children)
-        if total > MAX_VALUES:
-            raise _TooBig(
-                f":{n.start_mark.line + 1}",
-                f"holds more than {MAX_VALUES} values once its YAML aliases are expanded; a config needs a few hundred",
-            )
-        expanded[id(n)] = total
-        return total
-
-    count(node, 0)
-
-
-def _quote(value: Any, limit: int = QUOTE_CHARS) -> str:
-    """``repr(value)``, cut to ``limit`` characters (errors quote, they do not dump)."""
-    text = reprlib.repr(value) if isinstance(value, (dict, list, tuple, set)) else repr(value)
-    return text if len(text) <= limit else text[: limit - 3] + "..."
-
-
-_KEY = re.compile(r"[A-Za-z0-9_.-]{1,%d}" % NAME_CHARS)
-
-
-def _key(key: Any) -> str:
-    """A key of the config as its path shows it: a plain word as it is, anything else quoted."""
-    return key if isinstance(key, str) and _KEY.fullmatch(key) else _quote(key, NAME_CHARS)
-
-
-def _one_line(text: str, limit: int = 2 * QUOTE_CHARS) -> str:
-    """``text`` as one printable line (other characters escaped) of at most ``limit`` characters."""
-    text = "".join(c if c.isprintable() else repr(c)[1:-1] for c in text[:limit])
-    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def load_config(path: str | os.PathLike[str]) -> ExperimentConfig:
@@ -303,39 +187,10 @@ def load_config(path: str | os.PathLike[str]) -> ExperimentConfig:
 
 
 def parse_config(text: str, source: str = "<config>") -> ExperimentConfig:
-    """Validate the YAML ``text`` (``source`` names it in errors) within the limits above."""
-    if len(text.encode("utf-8", "replace")) > MAX_CONFIG_BYTES:
-        raise ConfigError(source, "", f"the config is {len(text.encode('utf-8', 'replace'))} bytes; the limit is {MAX_CONFIG_BYTES} bytes")
-    try:
-        loader = _UniqueKeyLoader(text)  # a SafeLoader subclass
-        try:
-            node = loader.get_single_node()
-            if node is not None:
-                _check_size(node)
-            data = loader.construct_document(node) if node is not None else None
-        finally:
-            loader.dispose()
-    except _TooBig as exc:
-        raise ConfigError(f"{source}{exc.where}", "", str(exc)) from None
-    except RecursionError:
-        raise ConfigError(source, "", f"nested deeper than {MAX_DEPTH} levels; a config needs a few") from None
-    except yaml.reader.ReaderError as exc:  # str() of it is three lines
-        line = text.count("\n", 0, exc.position) + 1
-        raise ConfigError(f"{source}:{line}", "", f"YAML syntax error: character #x{exc.character:04x} is not allowed ({exc.reason})") from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
-        line = f":{mark.line + 1}" if mark is not None else ""
-        problem = getattr(exc, "problem", None) or str(exc)
-        raise ConfigError(f"{source}{line}", "", f"YAML syntax error: {_one_line(problem)}") from None
+    """Validate the YAML ``text`` (``source`` names it in errors) within the limits of
+    ``pytest_sal.config_yaml`` and the schema's."""
+    data = read_yaml(text, source)
     return _Parser(source).config(data, text)
-
-
-def _type_name(value: Any) -> str:
-    if value is None:
-        return "null"
-    return {bool: "a boolean", int: "an integer", float: "a number", str: "a string", list: "a list", dict: "a mapping"}.get(
-        type(value), type(value).__name__
-    )
 
 
 def _is_number(value: Any) -> bool:
@@ -407,11 +262,11 @@ class _Parser:
     # -- generic helpers
     def mapping(self, value: Any, where: str, known: tuple[str, ...], required: tuple[str, ...] = ()) -> dict[str, Any]:
         if not isinstance(value, dict):
-            raise self.error(where or "top level", f"must be a mapping with keys {', '.join(known)}; got {_type_name(value)}")
+            raise self.error(where or "top level", f"must be a mapping with keys {', '.join(known)}; got {type_name(value)}")
         prefix = f"{where}." if where else ""
         for key in value:
             if key not in known:
-                raise self.error(f"{prefix}{_key(key)}", f"unknown key; known: {', '.join(known)}")
+                raise self.error(f"{prefix}{key_text(key)}", f"unknown key; known: {', '.join(known)}")
         for key in required:
             if value.get(key) is None:
                 raise self.error(f"{prefix}{key}", "is required")
@@ -434,7 +289,7 @@ class _Parser:
         if optional:
             words += " or null"
         if not ok or (minimum is not None and value < minimum):
-            raise self.error(where, f"{_quote(value)} is not valid; must be {words}")
+            raise self.error(where, f"{quote(value)} is not valid; must be {words}")
         return float(value) if kind == "number" else value
 
     def search_trials(self, value: Any, where: str) -> int:
@@ -461,16 +316,16 @@ class _Parser:
     def checked_path(self, text: str, where: str) -> str:
         """``text``, refused if it cannot be a path (see ``path``)."""
         if "\0" in text:
-            raise self.error(where, f"contains a NUL character ({_quote(text)}); no path can hold one")
+            raise self.error(where, f"contains a NUL character ({quote(text)}); no path can hold one")
         try:
             encoded = os.fsencode(text)
         except UnicodeEncodeError:
-            raise self.error(where, f"{_quote(text)} holds a character no file name can hold here") from None
+            raise self.error(where, f"{quote(text)} holds a character no file name can hold here") from None
         longest = max(encoded.split(b"/"), key=len)
         if len(encoded) > MAX_PATH_BYTES or len(longest) > MAX_NAME_BYTES:
             raise self.error(
                 where,
-                f"{_quote(text)} is too long ({len(encoded)} bytes, a name of {len(longest)}); "
+                f"{quote(text)} is too long ({len(encoded)} bytes, a name of {len(longest)}); "
                 f"a path may have at most {MAX_PATH_BYTES} bytes and each name in it {MAX_NAME_BYTES}",
             )
         return text
@@ -488,7 +343,7 @@ class _Parser:
             return
         if not any(fits(value) for _, fits in allowed):
             words = [w for w, _ in allowed]
-            raise self.error(where, f"{_quote(value)} is not valid; must be {', '.join(words[:-1]) + ' or ' if len(words) > 1 else ''}{words[-1]}")
+            raise self.error(where, f"{quote(value)} is not valid; must be {', '.join(words[:-1]) + ' or ' if len(words) > 1 else ''}{words[-1]}")
         if isinstance(value, str) and Path in _alternatives(hint):
             self.checked_path(value, where)
 
@@ -500,13 +355,13 @@ class _Parser:
         except PluginError as exc:
             names = [n for n in registry.names() if n not in hidden]
             if name in names:  # installed, but it cannot be loaded
-                raise self.error(where, _one_line(str(exc), 3 * QUOTE_CHARS)) from None
-            raise self.error(where, f"unknown {registry.what} {_quote(name, NAME_CHARS)}; known: {', '.join([*known, *names])}") from None
+                raise self.error(where, one_line(str(exc), 3 * QUOTE_CHARS)) from None
+            raise self.error(where, f"unknown {registry.what} {quote(name, NAME_CHARS)}; known: {', '.join([*known, *names])}") from None
 
     def safe_name(self, value: Any, where: str) -> str:
         self.typed(value, where, "str")
         if not SAFE_NAME.fullmatch(value):  # fullmatch: "name\n" is refused too (match's $ allows it)
-            raise self.error(where, f"{_quote(value)} cannot be a folder name; use {SAFE_NAME_TEXT}")
+            raise self.error(where, f"{quote(value)} cannot be a folder name; use {SAFE_NAME_TEXT}")
         return value
 
     # -- sections
@@ -545,9 +400,9 @@ class _Parser:
             except OSError as exc:  # stat refused (a folder above is unreadable)
                 found = f"cannot be read ({exc.strerror})"
             if found:
-                raise self.error("dataset.path", f"{_quote(str(folder))} {found}; give the dataset folder")
+                raise self.error("dataset.path", f"{quote(str(folder))} {found}; give the dataset folder")
         elif kind != "synthetic":
-            raise self.error("dataset.path", f"is required for dataset kind {_quote(kind)}")
+            raise self.error("dataset.path", f"is required for dataset kind {quote(kind)}")
         sequence = d.get("sequence")
         if kind == "kitti" and (type(sequence) is int or isinstance(sequence, float) and sequence.is_integer()):
             sequence = f"{int(sequence):02d}"
@@ -557,16 +412,16 @@ class _Parser:
         for key in options:
             if key not in allowed or key in ("sequence", "stereo"):
                 rest = [a for a in allowed if a not in ("sequence", "stereo")]
-                raise self.error(f"dataset.options.{_key(key)}", f"unknown option of dataset kind {_quote(kind)}; known: {', '.join(rest) or 'none'}")
+                raise self.error(f"dataset.options.{key_text(key)}", f"unknown option of dataset kind {quote(kind)}; known: {', '.join(rest) or 'none'}")
         hints = _option_hints(dataset_kind)
         for key, value in options.items():
             self.option(value, f"dataset.options.{key}", hints.get(key))
         frames = options.get("frames")
         if _is_number(frames) and not 1 <= frames <= MAX_RENDERED_FRAMES:
-            raise self.error("dataset.options.frames", f"{_quote(frames)} is not valid; must be a whole number in 1 .. {MAX_RENDERED_FRAMES}")
+            raise self.error("dataset.options.frames", f"{quote(frames)} is not valid; must be a whole number in 1 .. {MAX_RENDERED_FRAMES}")
         for key, given in (("sequence", sequence), ("stereo", stereo or None)):
             if given is not None and key not in allowed:
-                raise self.error(f"dataset.{key}", f"dataset kind {_quote(kind)} has no {key} option; its options: {', '.join(allowed) or 'none'}")
+                raise self.error(f"dataset.{key}", f"dataset kind {quote(kind)} has no {key} option; its options: {', '.join(allowed) or 'none'}")
         return DatasetConfig(
             type=kind,
             path=folder,
@@ -591,11 +446,11 @@ class _Parser:
             d = self.mapping(item, where, _PERTURBATION, required=("name", "type"))
             name = self.safe_name(d["name"], f"{where}.name")
             if name in seen:
-                raise self.error(f"{where}.name", f"{_quote(name)} is already the name of perturbations[{seen[name]}]; names must be unique (they are folder names)")
+                raise self.error(f"{where}.name", f"{quote(name)} is already the name of perturbations[{seen[name]}]; names must be unique (they are folder names)")
             seen[name] = i
             kind = self.typed(d["type"], f"{where}.type", "str")
             if name == BASELINE and kind != "none":
-                raise self.error(f"{where}.name", f"{BASELINE!r} is kept for the clean sequence (type none); rename this {_quote(kind)} perturbation")
+                raise self.error(f"{where}.name", f"{BASELINE!r} is kept for the clean sequence (type none); rename this {quote(kind)} perturbation")
             enabled = self.typed(d.get("enabled", True), f"{where}.enabled", "bool")
             params = self.typed(d.get("parameters") or {}, f"{where}.parameters", "dict")
             if kind == "none":
@@ -620,12 +475,12 @@ class _Parser:
         specs = cls.parameters()
         for key, value in params.items():
             if key not in specs:
-                raise self.error(f"{where}.parameters.{_key(key)}", f"{kind} has no such parameter; parameters: {', '.join(specs) or 'none'}")
+                raise self.error(f"{where}.parameters.{key_text(key)}", f"{kind} has no such parameter; parameters: {', '.join(specs) or 'none'}")
             spec = specs[key]
             try:
                 spec.validate(value, kind)
             except ParameterError:
-                shown = f"{_quote(value)}{' ' + spec.unit if spec.unit and _is_number(value) else ''}"
+                shown = f"{quote(value)}{' ' + spec.unit if spec.unit and _is_number(value) else ''}"
                 raise self.error(f"{where}.parameters.{key}", f"{shown} is not valid; {key} must be {spec.allowed()}") from None
             if spec.domain == "text":  # a file (night's ONNX model)
                 self.path(value, f"{where}.parameters.{key}", optional=spec.optional)
@@ -638,7 +493,7 @@ class _Parser:
         d = self.mapping(params, where, _COMPOSITE, required=("modules",))
         mode = d.get("mode", "sequential")
         if mode != "sequential":
-            raise self.error(f"{where}.mode", f"{_quote(mode)} is not valid; the only mode is 'sequential'")
+            raise self.error(f"{where}.mode", f"{quote(mode)} is not valid; the only mode is 'sequential'")
         modules = self.typed(d["modules"], f"{where}.modules", "list")
         if not modules:
             raise self.error(f"{where}.modules", "must list at least one module")
@@ -650,7 +505,7 @@ class _Parser:
             s = self.mapping(item, at, _STEP, required=("type",))
             kind = self.typed(s["type"], f"{at}.type", "str")
             if kind in ("none", "composite"):
-                raise self.error(f"{at}.type", f"{_quote(kind)} cannot be a step of a composite; use a perturbation module")
+                raise self.error(f"{at}.type", f"{quote(kind)} cannot be a step of a composite; use a perturbation module")
             step_params = self.typed(s.get("parameters") or {}, f"{at}.parameters", "dict")
             self.module(kind, step_params, at)
             name = self.typed(s.get("name"), f"{at}.name", "str", optional=True)
@@ -672,10 +527,10 @@ class _Parser:
         target = self.typed(d["target_perturbation"], f"{w}.target_perturbation", "str")
         by_name = {p.name: p for p in perturbations}
         if target not in by_name:
-            raise self.error(f"{w}.target_perturbation", f"{_quote(target)} is not a perturbation of this config; perturbations: {', '.join(by_name)}")
+            raise self.error(f"{w}.target_perturbation", f"{quote(target)} is not a perturbation of this config; perturbations: {', '.join(by_name)}")
         pert = by_name[target]
         if pert.type == "none":
-            raise self.error(f"{w}.target_perturbation", f"{_quote(target)} is the clean sequence (type none); it has no parameter to search")
+            raise self.error(f"{w}.target_perturbation", f"{quote(target)} is the clean sequence (type none); it has no parameter to search")
         parameter = self.typed(d["parameter"], f"{w}.parameter", "str")
         module = build_module(pert)
         assert module is not None
@@ -684,17 +539,17 @@ class _Parser:
                 position, spec = module.param(parameter)
             except ParameterError:
                 addresses = [a for a, (_, p) in module.addresses().items() if p.searchable and "@" not in a and "." in a]
-                raise self.error(f"{w}.parameter", f"composite {_quote(target)} has no parameter {_quote(parameter)}; searchable: {', '.join(addresses) or 'none'}") from None
+                raise self.error(f"{w}.parameter", f"composite {quote(target)} has no parameter {quote(parameter)}; searchable: {', '.join(addresses) or 'none'}") from None
             owner = module.steps[position].name
         else:
             spec = type(module).parameters().get(parameter)  # type: ignore[assignment]
             owner = module.name
         searchable = [a for a, (_, p) in module.addresses().items() if p.searchable and "@" not in a and "." in a] if isinstance(module, Composite) else list(type(module).searchable())
         if spec is None or not spec.searchable:
-            raise self.error(f"{w}.parameter", f"{_quote(parameter)} is not a searchable parameter of {_quote(target)} ({module.name}); searchable: {', '.join(searchable) or 'none'}")
+            raise self.error(f"{w}.parameter", f"{quote(parameter)} is not a searchable parameter of {quote(target)} ({module.name}); searchable: {', '.join(searchable) or 'none'}")
         declared = self.typed(d.get("module", ""), f"{w}.module", "str")
         if declared and declared != owner:
-            raise self.error(f"{w}.module", f"{_quote(declared)} does not match the module of {_quote(parameter)} in {_quote(target)}, which is {owner!r}")
+            raise self.error(f"{w}.module", f"{quote(declared)} does not match the module of {quote(parameter)} in {quote(target)}, which is {owner!r}")
         scale = spec.search_space()
         unit = f" {scale.unit}" if scale.unit else ""
         allowed = f"{'an integer' if scale.domain == 'integer' else 'a number'} in {scale.min:g} .. {scale.max:g}{unit}"
@@ -703,7 +558,7 @@ class _Parser:
             v = d[key]
             ok = _is_number(v) and scale.min <= v <= scale.max and (scale.domain != "integer" or float(v).is_integer())
             if not ok:
-                raise self.error(f"{w}.{key}", f"{_quote(v)}{unit if _is_number(v) else ''} is not valid; {parameter} search values must be {allowed}")
+                raise self.error(f"{w}.{key}", f"{quote(v)}{unit if _is_number(v) else ''} is not valid; {parameter} search values must be {allowed}")
             bounds[key] = int(v) if scale.domain == "integer" else float(v)
         if not bounds["lower_bound"] < bounds["upper_bound"]:
             raise self.error(f"{w}.upper_bound", f"{bounds['upper_bound']:g} must be greater than lower_bound {bounds['lower_bound']:g}")
@@ -743,7 +598,7 @@ def build_sequence(config: ExperimentConfig) -> Sequence:
     try:
         return open_dataset(ds.type, ds.path, start=ds.start, max_frames=ds.max_frames, **options)
     except SalError as exc:  # cut: a dataset kind may quote a whole option
-        raise ConfigError(config.source, "dataset", _one_line(str(exc), 3 * QUOTE_CHARS)) from None
+        raise ConfigError(config.source, "dataset", one_line(str(exc), 3 * QUOTE_CHARS)) from None
 
 
 def build_module(pert: PerturbationConfig) -> Perturbation | None:
