@@ -7,14 +7,14 @@ import math
 import re
 from datetime import datetime
 from pathlib import Path
-
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
-from matplotlib.ticker import FuncFormatter
+from typing import TYPE_CHECKING
 
 from pytest_sal.history import DEFAULT_ROOT, History, OutcomeKey, RunRecord
 from pytest_sal.outcome import Outcome
 from sal_adapters import SalError
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 __all__ = ["add_history_commands", "history_figure", "plot_history"]
 
@@ -177,6 +177,10 @@ def history_figure(trend: list[tuple[RunRecord, Outcome]], *, title: str | None 
     logarithmic when the values span more than a decade. An unbracketed boundary is a triangle
     at its one end, pointing to where the boundary lies. Runs of another parameter than the
     latest run's are left out."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg  # matplotlib only when plotting
+    from matplotlib.figure import Figure
+    from matplotlib.ticker import FuncFormatter
+
     if not trend:
         raise SalError("nothing to plot: no run holds this test")
     latest = trend[-1][1]

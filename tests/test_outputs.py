@@ -103,9 +103,7 @@ def test_dry_run_touches_nothing_on_disk(tmp_path: Path) -> None:
     work = tmp_path / "work"
     work.mkdir()
     config = write_config(work)
-    # matplotlib (which the sal command imports) builds its font list once per user: not ours
-    subprocess.run([sys.executable, "-c", "import matplotlib.figure"], env=env, check=True)
-    before = snapshot(tmp_path)
+    before = snapshot(tmp_path)  # a fresh home: not even matplotlib's font list may appear
 
     out = subprocess.run([sys.executable, "-m", "pytest_sal.cli", "perturb", str(config), "--dry-run", "--cache-dir", str(tmp_path / "trials")],
                          cwd=work, env=env, capture_output=True, text=True, timeout=300)
