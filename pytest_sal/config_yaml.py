@@ -19,6 +19,7 @@ __all__ = [
     "MAX_DEPTH",
     "MAX_VALUES",
     "NAME_CHARS",
+    "PATH_CHARS",
     "QUOTE_CHARS",
     "ConfigError",
     "key_text",
@@ -47,6 +48,8 @@ MAX_VALUES = 100_000
 #: Characters of a value quoted in an error message, and of a key or a name that names nothing known.
 QUOTE_CHARS = 80
 NAME_CHARS = 40
+#: Characters of a path quoted in an error message (a real path, already checked: the user needs it whole).
+PATH_CHARS = 200
 
 
 def type_name(value: Any) -> str:

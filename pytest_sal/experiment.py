@@ -25,7 +25,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any, TypeVar
 
-from pytest_sal.config_yaml import NAME_CHARS, QUOTE_CHARS, ConfigError, key_text, one_line, quote, read_yaml, type_name
+from pytest_sal.config_yaml import NAME_CHARS, PATH_CHARS, QUOTE_CHARS, ConfigError, key_text, one_line, quote, read_yaml, type_name
 from sal_adapters import DATASETS, SalError, Sequence, open_dataset
 from sal_adapters.datasets import DatasetKind
 from sal_adapters.plugins import EntryPointRegistry, PluginError
@@ -400,7 +400,7 @@ class _Parser:
             except OSError as exc:  # stat refused (a folder above is unreadable)
                 found = f"cannot be read ({exc.strerror})"
             if found:
-                raise self.error("dataset.path", f"{quote(str(folder))} {found}; give the dataset folder")
+                raise self.error("dataset.path", f"{quote(str(folder), PATH_CHARS)} {found}; give the dataset folder")
         elif kind != "synthetic":
             raise self.error("dataset.path", f"is required for dataset kind {quote(kind)}")
         sequence = d.get("sequence")
