@@ -319,9 +319,9 @@ def test_hostile_configs_end_in_one_short_line_quickly(tmp_path: Path) -> None:
         valid.replace("tolerance: 5", "tolerance: .nan"): "robustness_boundary.tolerance: nan is not valid; must be a number > 0",
     }
     for text, message in cases.items():
-        start = time.perf_counter()
+        start = time.process_time()  # CPU time: the bound does not move with the load
         error = error_of(tmp_path, text)
-        assert time.perf_counter() - start < 1.0, message
+        assert time.process_time() - start < 1.0, message
         assert message in error and "\n" not in error and len(error) < 400, error
 
 

@@ -96,9 +96,9 @@ def test_soiling_rejects_inverted_ranges() -> None:
 
 def test_crack_pattern_is_generated_in_well_under_a_second() -> None:
     module = ready("cracked_lens")
-    start = time.perf_counter()
+    start = time.process_time()  # CPU time: the bound does not move with the load
     module.build("left", *KITTI_SIZE)
-    elapsed = time.perf_counter() - start
+    elapsed = time.process_time() - start
     assert elapsed < 1.0, f"crack generation at 1241x376 took {elapsed:.2f} s"
 
 
