@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
@@ -11,7 +12,7 @@ import numpy as np
 from sal_adapters.atomic import staged_file
 from sal_adapters.errors import DatasetError
 
-__all__ = ["IMAGE_SUFFIXES", "is_grey", "probe_image", "read_depth", "read_image", "scaled_to_width", "write_depth", "write_image"]
+__all__ = ["IMAGE_SUFFIXES", "is_grey", "probe_image", "read_depth", "read_image", "read_stored", "scaled_to_width", "write_depth", "write_image"]
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".pgm")
 
@@ -59,6 +60,20 @@ def read_depth(path: Path, depth_scale: float | None) -> np.ndarray:
     if depth_scale is None or depth_scale <= 0:
         raise DatasetError("depth image needs a positive depth scale (units per metre)", path)
     return raw.astype(np.float32) / np.float32(depth_scale)
+
+
+def read_stored(path: Path, read: Callable[[Path], np.ndarray]) -> tuple[np.ndarray | None, str | None]:
+    """A cache's stored array: ``(array, None)``; ``(None, None)`` when there is no file;
+    ``(None, problem)`` when ``read`` cannot decode it or the file cannot be opened (the
+    caches warn with ``problem`` and compute the array again)."""
+    if not path.is_file():
+        return None, None
+    try:
+        return read(path), None
+    except DatasetError as exc:
+        return None, exc.problem
+    except OSError as exc:  # a file this user may not read
+        return None, exc.strerror or str(exc)
 
 
 def write_image(path: Path, rgb: np.ndarray, grey: bool = False) -> None:

@@ -21,7 +21,7 @@ import numpy as np
 
 from sal_adapters.cache_dir import cache_writes_allowed, user_cache_dir
 from sal_adapters.errors import CacheWarning, DatasetError
-from sal_adapters.images import read_depth, read_image, write_depth, write_image
+from sal_adapters.images import read_depth, read_image, read_stored, write_depth, write_image
 from sal_adapters.sequence import FrameRecord, Sequence
 from sal_adapters.synthetic.layout import (
     DEPTH,
@@ -89,17 +89,13 @@ class FrameStore:
         cannot be read or is not the array a render gives (HxWx3 uint8 RGB, HxW float32 depth):
         then one ``CacheWarning`` names it, and the caller renders the frame again."""
         path = self._path(stream, index)
-        if not path.is_file():
-            return None
         width, height = self.world.intrinsics[4:]
         expected = (height, width) if stream == DEPTH else (height, width, 3)
-        try:
-            data = read_depth(path, None) if stream == DEPTH else read_image(path)
-            if data.shape != expected:
-                raise DatasetError(f"holds an array of shape {data.shape}, a render gives {expected}", path)
-        except (DatasetError, OSError) as exc:  # OSError: a file this user may not read
-            self._discard(path, exc.problem if isinstance(exc, DatasetError) else exc.strerror or str(exc))
-            return None
+        data, problem = read_stored(path, partial(read_depth, depth_scale=None) if stream == DEPTH else read_image)
+        if data is not None and data.shape != expected:
+            data, problem = None, f"holds an array of shape {data.shape}, a render gives {expected}"
+        if problem is not None:
+            self._discard(path, problem)
         return data
 
     def _discard(self, path: Path, problem: str) -> None:

@@ -12,6 +12,7 @@ import json
 import warnings
 from abc import ABC, abstractmethod
 from collections import OrderedDict
+from functools import partial
 from pathlib import Path
 from threading import Lock
 from typing import Any, ClassVar
@@ -19,8 +20,8 @@ from typing import Any, ClassVar
 import numpy as np
 
 from sal_adapters.cache_dir import cache_writes_allowed, user_cache_dir
-from sal_adapters.errors import CacheWarning, DatasetError
-from sal_adapters.images import read_depth, write_depth
+from sal_adapters.errors import CacheWarning
+from sal_adapters.images import read_depth, read_stored, write_depth
 from sal_adapters.sequence import Sequence
 from sal_modules.base import DepthLookup
 
@@ -114,22 +115,16 @@ class CachedDepth:
             write_depth(path, depth, None)
         return depth
 
-
     def _stored(self, path: Path) -> np.ndarray | None:
         """The stored depth at ``path``; ``None`` when there is none, or when it is damaged
         (then one warning names it and the caller computes it again)."""
-        if not path.is_file():
-            return None
         camera = self.sequence.camera
-        try:
-            depth = read_depth(path, None)
-            if depth.shape != (camera.height, camera.width):
-                raise DatasetError(f"depth array of shape {depth.shape}, the frames are {camera.height}x{camera.width} px", path)
-        except (DatasetError, OSError) as exc:  # OSError: a file this user may not read
-            problem = exc.problem if isinstance(exc, DatasetError) else exc.strerror or str(exc)
+        depth, problem = read_stored(path, partial(read_depth, depth_scale=None))
+        if depth is not None and depth.shape != (camera.height, camera.width):
+            depth, problem = None, f"depth array of shape {depth.shape}, the frames are {camera.height}x{camera.width} px"
+        if problem is not None:
             done = "computed again and replaced" if self._store else "computed again (nothing is stored)"
             warnings.warn(CacheWarning(f"{path}: bad cached depth, {done}: {problem}"), stacklevel=4)
-            return None
         return depth
 
 
