@@ -1,5 +1,6 @@
 """Fault injection shared by the tests and the inner suites they run: a read-only mount
-simulated in-process (the tests run as root, which ignores file modes)."""
+simulated in-process (the tests run as root, which ignores file modes), and a snapshot of a
+folder to show that a fault left it untouched."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-__all__ = ["refuse_writes_under"]
+__all__ = ["refuse_writes_under", "stamps"]
 
 
 def refuse_writes_under(root: Path, setattr: Callable[[Any, str, Any], None] = setattr) -> None:
@@ -29,3 +30,9 @@ def refuse_writes_under(root: Path, setattr: Callable[[Any, str, Any], None] = s
     real_open = os.open
     for name in ("open", "mkdir", "rename", "replace", "unlink", "rmdir", "utime"):
         setattr(os, name, guard(getattr(os, name)))
+
+
+def stamps(root: Path) -> dict[str, tuple[int, int]]:
+    """Every path under ``root`` with its size and modification time (ns): equal before and
+    after means nothing was written, removed or touched."""
+    return {str(p.relative_to(root)): (p.stat().st_size, p.stat().st_mtime_ns) for p in sorted(root.rglob("*"))}

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from faults import refuse_writes_under
+from faults import refuse_writes_under, stamps
 
 from pytest_sal import tracking_rate
 from pytest_sal.cache import CacheWarning, ContentCache
@@ -158,10 +158,6 @@ def read_only(monkeypatch: pytest.MonkeyPatch) -> Callable[[Path], None]:
     return lambda root: refuse_writes_under(root, monkeypatch.setattr)
 
 
-def snapshot(root: Path) -> dict[str, tuple[int, int]]:
-    return {str(p.relative_to(root)): (p.stat().st_size, p.stat().st_mtime_ns) for p in sorted(root.rglob("*"))}
-
-
 def test_a_read_only_cache_serves_its_entries_and_stores_nothing(tmp_path: Path, read_only: Callable[[Path], None]) -> None:
     root = tmp_path / "cache"
     writer = ContentCache(root)
@@ -169,7 +165,7 @@ def test_a_read_only_cache_serves_its_entries_and_stores_nothing(tmp_path: Path,
     writer.put(cache_key(n=9), {"ate": 0.9})
     writer.compute_dir(cache_key(n=2), lambda folder: (folder / "f.png").write_bytes(b"png"))
     writer.path(cache_key(n=9)).write_bytes(b"\xff")
-    before = snapshot(root)
+    before = stamps(root)
     read_only(root)
     cache = ContentCache(root)
 
@@ -190,7 +186,7 @@ def test_a_read_only_cache_serves_its_entries_and_stores_nothing(tmp_path: Path,
     assert messages[0] == f"the cache at {root} is read-only (Read-only file system): the entries it holds are used, new results are computed and not stored"
     assert len(messages) == 2 and messages[1].startswith(f"{cache.path(cache_key(n=9))}: bad cache entry, ignored (the cache is read-only)")
     assert cache.read_only == "Read-only file system" and cache.get(cache_key(n=1)) == {"ate": 0.5}
-    assert snapshot(root) == before  # nothing written, removed or touched
+    assert stamps(root) == before  # nothing written, removed or touched
 
 
 class Failing(FakeSlam):

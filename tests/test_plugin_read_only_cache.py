@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from faults import stamps
 from plugin_suites import calls, project, run
 
 TESTS = '''
@@ -23,14 +24,10 @@ refuse_writes_under(HERE / "cache")
 '''
 
 
-def tree(root: Path) -> dict[str, tuple[int, int]]:
-    return {str(p.relative_to(root)): (p.stat().st_size, p.stat().st_mtime_ns) for p in sorted(root.rglob("*"))}
-
-
 def test_a_read_only_cache_serves_a_session(pytester: pytest.Pytester) -> None:
     project(pytester, TESTS)
     run(pytester, []).assert_outcomes(passed=1)
-    runs, before = calls(pytester), tree(pytester.path / "cache")
+    runs, before = calls(pytester), stamps(pytester.path / "cache")
     assert runs > 0
     conftest = pytester.path / "conftest.py"
     conftest.write_text(conftest.read_text() + READ_ONLY)
@@ -43,6 +40,6 @@ def test_a_read_only_cache_serves_a_session(pytester: pytest.Pytester) -> None:
     result = run(pytester, ["-p", "no:xdist"], "-W", "always")
     result.assert_outcomes(passed=2)
     assert calls(pytester) > runs  # test_fog_30's new trials ran, and were not stored
-    assert tree(pytester.path / "cache") == before
+    assert stamps(pytester.path / "cache") == before
     text = result.stdout.str()
     assert text.count("is read-only (Read-only file system): the entries it holds are used, new results are computed and not stored") == 1, text
