@@ -45,7 +45,9 @@ __all__ = [
     "OutcomeKey",
     "RunRecord",
     "commit_info",
+    "cpu_model",
     "machine_info",
+    "machine_text",
     "outcome_key",
 ]
 
@@ -69,14 +71,40 @@ def outcome_key(outcome: Outcome) -> OutcomeKey:
 
 
 def machine_info() -> dict[str, Any]:
-    """``hostname``, ``platform``, ``machine`` (CPU architecture), ``cpu_count``, ``python``."""
+    """``hostname``, ``platform``, ``machine`` (CPU architecture), ``cpu_model``, ``cpu_count``,
+    ``usable_cpus`` (this process's CPU affinity), ``load_avg`` (1, 5, 15 min run-queue
+    averages now), ``python``."""
     return {
         "hostname": platform.node(),
         "platform": platform.platform(),
         "machine": platform.machine(),
+        "cpu_model": cpu_model(),
         "cpu_count": os.cpu_count(),
+        "usable_cpus": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
+        "load_avg": [round(x, 2) for x in os.getloadavg()] if hasattr(os, "getloadavg") else None,
         "python": f"{platform.python_implementation()} {platform.python_version()}",
     }
+
+
+def cpu_model() -> str:
+    """The CPU's model name (``/proc/cpuinfo``'s first ``model name``; ``platform.processor()``
+    elsewhere), or ``""``."""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as info:
+            for line in info:
+                key, _, value = line.partition(":")
+                if key.strip() in ("model name", "Model", "cpu model"):
+                    return " ".join(value.split())
+    except OSError:
+        pass
+    return platform.processor() or ""
+
+
+def machine_text(info: dict[str, Any]) -> str:
+    """The machine as results depend on it: ``Intel Xeon Gold 6230 (2 cores)``."""
+    cores = info.get("usable_cpus") or info.get("cpu_count")
+    model = info.get("cpu_model") or info.get("machine") or "unknown CPU"
+    return f"{model} ({cores} cores)" if cores else str(model)
 
 
 def commit_info(cwd: str | Path | None = None) -> tuple[str, bool]:
@@ -252,25 +280,62 @@ class History:
         return found
 
     def previous(self, outcome_key: OutcomeKey, ref: str | None = None) -> Outcome | None:
-        """The outcome with ``outcome_key`` (``(test_id, system, dataset)``) to compare with.
+        """The outcome with ``outcome_key`` (``(test_id, system, dataset)``) to compare with:
+        ``baseline(...)``'s outcome, or ``None``."""
+        found = self.baseline(outcome_key, ref)
+        return None if found is None else found[1]
+
+    def baseline(self, outcome_key: OutcomeKey, ref: str | None = None) -> tuple[RunRecord, Outcome] | None:
+        """The run and outcome with ``outcome_key`` to compare with.
 
         Args:
-            ref: ``None`` or ``"last"``: the newest run holding the key; a run number
-                (``"0003"``), a run name or a commit prefix: the newest of the runs it names that
-                holds the key.
+            ref: ``None`` or ``"last"``: the newest run holding the key whose outcome did not
+                fail a regression gate (so rerunning a regressed commit compares with the last
+                good run, not with itself); a run number (``"0003"``), a run name or a commit
+                prefix: the newest of the runs it names that holds the key.
 
         Returns:
-            the outcome, or ``None`` when no (named) run holds the key.
+            ``(run, outcome)``, or ``None`` when no (named) run holds the key.
 
         Raises:
-            SalError: ``ref`` names no run at all (a typo should not silently compare nothing).
+            SalError: ``ref`` names no run at all (the message lists the latest runs).
         """
-        runs = self.runs() if ref in (None, "last") else self.find_runs(ref)
+        last = ref in (None, "last")
+        runs = self.runs() if last else self.find_runs(str(ref))
         for run in reversed(runs):
             outcome = run.get(tuple(outcome_key))  # type: ignore[arg-type]
-            if outcome is not None:
-                return outcome
+            if outcome is not None and not (last and outcome.regression):
+                return run, outcome
         return None
+
+    def prune(self, *, keep: int | None = None, older_than_s: float | None = None, dry_run: bool = False) -> list[RunRecord]:
+        """Remove old runs; return those removed (or, with ``dry_run``, those that would be).
+
+        A run goes when it matches every condition given: it is not among the newest ``keep``
+        runs, and it was written more than ``older_than_s`` seconds ago. Never removed: the
+        newest run of each name (a baseline such as ``main`` survives any prune) and the newest
+        run. Run numbers are never reused: the newest reservation stays.
+        """
+        if keep is None and older_than_s is None:
+            raise SalError("history prune: give --keep N, --older-than AGE (e.g. 30d), or both")
+        runs = self.runs()
+        newest_of_name = {run.name: run for run in runs if run.name}  # the last one wins
+        protected = {run.number for run in [*runs[-1:], *newest_of_name.values()]}
+        now = datetime.now(UTC)
+        doomed = [
+            run
+            for index, run in enumerate(runs)
+            if run.number not in protected
+            and (keep is None or index < len(runs) - keep)
+            and (older_than_s is None or (now - _created(run)).total_seconds() > older_than_s)
+        ]
+        if dry_run:
+            return doomed
+        for run in doomed:  # the newest run (and its reservation) stays, so numbers keep rising
+            run.path.unlink(missing_ok=True)
+            (self.root / _NUMBERS / run.label).unlink(missing_ok=True)
+            self._cache.pop(run.path, None)
+        return doomed
 
     def trend(self, test_id: str, system: str | None = None, dataset: str | None = None) -> list[tuple[RunRecord, Outcome]]:
         """``(run, outcome)`` of every run holding ``test_id`` (and ``system`` / ``dataset`` when
@@ -287,6 +352,15 @@ class History:
     def outcome_keys(self) -> list[OutcomeKey]:
         """Every outcome key in the history, in the order first seen."""
         return list(dict.fromkeys(outcome_key(o) for run in self.runs() for o in run.outcomes))
+
+
+def _created(run: RunRecord) -> datetime:
+    """When ``run`` was written (its ``created`` time; the file's mtime when that is unreadable)."""
+    try:
+        created = datetime.fromisoformat(run.created)
+        return created if created.tzinfo else created.replace(tzinfo=UTC)
+    except ValueError:
+        return datetime.fromtimestamp(run.path.stat().st_mtime, UTC)
 
 
 def _read_run(path: Path) -> RunRecord | None:

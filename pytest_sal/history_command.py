@@ -9,6 +9,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from pytest_sal.gate import NOT_COMPARED
 from pytest_sal.history import DEFAULT_ROOT, History, OutcomeKey, RunRecord
 from pytest_sal.outcome import Outcome
 from sal_adapters import SalError
@@ -133,7 +134,12 @@ def _print_table(rows: list[tuple[str, ...]]) -> None:
 
 
 def _verdict(outcome: Outcome) -> str:
-    return outcome.verdict + (" (regressed)" if outcome.regression else "")
+    """The verdict pytest reported: a test the regression gate failed is ``failed (regressed)``
+    (or ``failed (not compared)`` under ``--sal-compare-missing=fail``) even when its
+    requirement held."""
+    if not outcome.regression:
+        return outcome.verdict
+    return "failed (not compared)" if outcome.regression.startswith(NOT_COMPARED) else "failed (regressed)"
 
 
 def _date(run: RunRecord, minutes: bool = False) -> str:

@@ -120,8 +120,12 @@ class Outcome:
             severe side (positive: the system copes beyond the requirement).
         previous: the boundary of the same test in the history, when compared.
         regression: why the comparison failed the test, when it did.
+        comparison: what it was compared with (``main (run 0003, commit 1a2b3c4)``, and a
+            note when that ran on another machine or system version), or why it was not
+            (``not compared: ...``); empty without ``--sal-compare``.
         reproduction: one line that re-runs the deciding trial.
-        commit, machine: where it ran.
+        commit, machine: where it ran (``machine``: the CPU model and cores).
+        system_version: ``SlamSystem.version_text()`` of the system that ran.
     """
 
     test_id: str
@@ -139,12 +143,14 @@ class Outcome:
     margin: float | None = None
     previous: Boundary | None = None
     regression: str | None = None
+    comparison: str = ""
     reproduction: str = ""
     system_options: dict[str, Any] = field(default_factory=dict)
     dataset_fingerprint: str = ""
     seed: int = 0
     commit: str = ""
     machine: str = ""
+    system_version: str = ""
     criteria: list[tuple[str, str, float]] = field(default_factory=list)
     envelope: str = ""
 

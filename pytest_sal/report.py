@@ -159,10 +159,13 @@ def boundary_shift(outcome: Outcome) -> float | None:
 
 
 def change_cell(outcome: Outcome) -> str:
+    """``REGRESSED``, ``no baseline`` (``--sal-compare`` found nothing to compare with), the
+    boundary's shift since the baseline, or ``-`` (not compared)."""
+    not_compared = outcome.comparison.startswith("not compared")
     if outcome.regression is not None:
-        return "REGRESSED"
+        return "NO BASELINE" if not_compared else "REGRESSED"
     if outcome.previous is None:
-        return "-"
+        return "no baseline" if not_compared else "-"
     shift = boundary_shift(outcome)
     return "changed" if shift is None else signed(shift, outcome.boundary.unit)
 

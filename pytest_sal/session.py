@@ -7,10 +7,13 @@ import argparse
 import json
 import math
 import os
+import shlex
 from pathlib import Path
 from typing import Any
 
 import pytest
+
+from pytest_sal.gate import MISSING_POLICIES, NOT_COMPARED, space_form_problem
 
 __all__ = ["SAL_SESSION", "SalSession", "add_options", "outcome_of"]
 
@@ -105,9 +108,14 @@ def add_options(parser: pytest.Parser) -> None:
     group.addoption("--sal-no-history", dest="sal_no_history", action="store_true", default=False,
                     help="do not append this run's boundaries to the history. Default: %(default)r")
     group.addoption("--sal-save", dest="sal_save", metavar="NAME", default=None,
-                    help="name this run in the history (compare against it later with --sal-compare=NAME)")
-    group.addoption("--sal-compare", dest="sal_compare", metavar="REF", nargs="?", const="last", default=None,
-                    help="compare each boundary with the history: the last run (default), a run number, name or commit")
+                    help="name this run in the history, e.g. --sal-save=main on the main branch; a run in which a "
+                    "--sal-compare-fail check failed is saved without the name, so it cannot become the baseline")
+    group.addoption("--sal-compare", dest="sal_compare", metavar="REF", nargs="?", const="", default=None,
+                    help="compare each boundary with a baseline in the history: a run name (default: ini sal_baseline, "
+                    "'main'), a run number, a commit prefix, or 'last' (the newest run that did not fail the gate)")
+    group.addoption("--sal-compare-missing", dest="sal_compare_missing", choices=("pass", "fail"), default=None,
+                    help="a test the baseline lacks (or no baseline at all): pass, said in the summary, or fail "
+                    "(ini sal_compare_missing). Default: pass")
     group.addoption("--sal-compare-fail", dest="sal_compare_fail", metavar="CHECK", action="append", type=_compare_fail, default=[],
                     help="fail a test whose result regressed against --sal-compare: boundary:10%% (relative), boundary:2.5 "
                     "(in the parameter's unit), ate_rmse:0.2 or ate_rmse:15%% at the edge. Repeatable")
@@ -118,6 +126,8 @@ def add_options(parser: pytest.Parser) -> None:
     parser.addini("sal_cache_dir", "trial cache folder (default .sal/cache)", default=None)
     parser.addini("sal_cache_size", "cache size limit, e.g. 5GB (default: none)", default=None)
     parser.addini("sal_history_dir", "history store (default .sal/history)", default=None)
+    parser.addini("sal_baseline", "the run name --sal-compare and --sal-compare-fail compare with (default main)", default="main")
+    parser.addini("sal_compare_missing", "pass or fail: a test with no baseline to compare with (default pass)", default="pass")
     parser.addini("sal_tolerance", "default search tolerance: the bracket's width in percent of its larger end (default 10)", default="10")
     parser.addini("sal_max_trials", "default trial budget of a boundary search (default 8)", default="8")
     parser.addini("sal_runs", "the most runs per trial; runs vote until one verdict leads by 2 (default auto: 1 for a deterministic system, 5 for a noisy one)", default="auto")
@@ -143,6 +153,11 @@ class SalSession:
         self.config = config
         root = Path(config.rootpath)
         opt = config.option
+        if not hasattr(config, "workerinput"):  # the controller saw the command line; workers got it checked
+            args = [*shlex.split(os.environ.get("PYTEST_ADDOPTS", "")), *config.invocation_params.args]
+            problem = space_form_problem(args, str(config.rootpath), None if config.inipath is None else str(config.inipath))
+            if problem:
+                raise pytest.UsageError(f"pytest-sal: {problem}")
 
         def ini(name: str) -> Any:
             return config.getini(name)
@@ -151,10 +166,15 @@ class SalSession:
         self.cache_size = getattr(opt, "sal_cache_size", None) or (_ini_size(ini("sal_cache_size")) if ini("sal_cache_size") else None)
         self.use_cache = not getattr(opt, "sal_no_cache", False)
         self.history_dir = Path(getattr(opt, "sal_history_dir", None) or ini("sal_history_dir") or root / ".sal" / "history")
-        self.compare = getattr(opt, "sal_compare", None)
         self.checks = list(getattr(opt, "sal_compare_fail", []) or [])
-        if self.checks and self.compare is None:
-            self.compare = "last"
+        self.compare = getattr(opt, "sal_compare", None)
+        if self.compare == "" or (self.checks and self.compare is None):
+            self.compare = str(ini("sal_baseline")).strip() or "main"
+        self.compare_missing = getattr(opt, "sal_compare_missing", None) or str(ini("sal_compare_missing")).strip()
+        if self.compare_missing not in MISSING_POLICIES:
+            raise pytest.UsageError(f"pytest-sal: ini option sal_compare_missing = {self.compare_missing!r}: expected pass or fail")
+        self.load_at_start = os.getloadavg() if hasattr(os, "getloadavg") else None
+        self._machine: str | None = None
         self.runs = None if str(config.getini("sal_runs")).strip() == "auto" else _ini_number(config, "sal_runs")
         self.seed = _ini_number(config, "sal_seed")
         self.timeout = _ini_number(config, "sal_timeout")
@@ -181,13 +201,7 @@ class SalSession:
         self.unwritten: list[str] = []  # outputs finish() could not write, said in the summary
         self._cache: Any = None
         self._history: Any = None
-        if self.compare not in (None, "last") and self.history.runs():
-            from sal_adapters import SalError
-
-            try:  # a ref that names no saved run; with no history yet there is nothing to compare
-                self.history.find_runs(self.compare)
-            except SalError as exc:
-                raise pytest.UsageError(f"pytest-sal: --sal-compare={self.compare}: {exc}") from None
+        self.notes: list[str] = []  # said at the end of the summary (what was written, what was not compared)
         self._datasets: dict[str, Any] = {}
 
     # -- collaborators -------------------------------------------------------------------------
@@ -249,36 +263,49 @@ class SalSession:
 
         requirement = item.function.sal_requirement  # type: ignore[attr-defined]
         runner = self._runner(item, requirement.envelope.ref, dataset, system, runs, workdir)
-        previous = self._previous(item.nodeid, system.name, dataset.name, self.compare or "last")
+        previous = self._start_from((item.nodeid, system.name, dataset.name))
         envelope = requirement.envelope
         start = warm_start(previous, parameter=envelope.ref.label, edge=envelope.value, worse=envelope.ref.param.worse)
         outcome = search_outcome(runner, requirement, self.settings, item.nodeid, start)
-        return self._compared(outcome, previous)
+        return self._finished(outcome, system)
 
     def single(self, item: pytest.Item, ref: Any, value: float, dataset: Any, system: Any, runs: int | None, workdir: Path) -> Any:
         from pytest_sal.robustness import single_outcome
 
         runner = self._runner(item, ref, dataset, system, runs, workdir)
         outcome = single_outcome(runner, item.function.sal_requirement, item.nodeid, value)  # type: ignore[attr-defined]
-        previous = self._previous(item.nodeid, system.name, dataset.name, self.compare) if self.compare else None
-        return self._compared(outcome, previous)
+        return self._finished(outcome, system)
 
-    def _previous(self, test_id: str, system: str, dataset: str, ref: str) -> Any:
+    def _start_from(self, key: tuple[str, str, str]) -> Any:
+        """The outcome whose boundary the search tries first: the baseline's under
+        ``--sal-compare``, else the last run's (``None`` when the history has neither)."""
+        from sal_adapters.errors import SalError
+
         if not self.history_dir.is_dir():
             return None
-        return self.history.previous((test_id, system, dataset), ref)
+        try:
+            return self.history.previous(key, self.compare or "last")
+        except SalError:  # the baseline is missing: the comparison says so
+            return self.history.previous(key, "last")
 
-    def _compared(self, outcome: Any, previous: Any) -> Any:
-        """``outcome`` with the ``--sal-compare`` result against ``previous`` (the same test's
-        outcome in the history run compared with, already looked up by the caller)."""
-        if self.compare is None or previous is None:
+    @property
+    def machine(self) -> str:
+        """This machine in words (``history.machine_text``), read once."""
+        if self._machine is None:
+            from pytest_sal.history import machine_info, machine_text
+
+            self._machine = machine_text(machine_info())
+        return self._machine
+
+    def _finished(self, outcome: Any, system: Any) -> Any:
+        """``outcome`` with where it ran and, under ``--sal-compare``, compared with its baseline."""
+        outcome.machine = self.machine
+        outcome.system_version = system.version_text()
+        if self.compare is None:
             return outcome
-        from pytest_sal.regression import regressions
+        from pytest_sal.gate import compare_with_baseline
 
-        outcome.previous = previous.boundary
-        found = regressions(self.checks, outcome, previous)
-        outcome.regression = "; ".join(found) if found else None
-        return outcome
+        return compare_with_baseline(outcome, self.history, self.compare, self.checks, missing=self.compare_missing)
 
     # -- collecting and reporting (controller) -------------------------------------------------
     def pytest_runtest_logreport(self, report: pytest.TestReport) -> None:
@@ -297,6 +324,17 @@ class SalSession:
             terminal.write_line(line)
         for problem in self.unwritten:
             terminal.write_line(f"pytest-sal: {problem}", red=True)
+        for note in self.comparison_notes() + self.notes:
+            terminal.write_line(f"pytest-sal: {note}", yellow=True)
+
+    def comparison_notes(self) -> list[str]:
+        """What the gate could not compare, in one line (``--sal-compare-missing`` says what
+        that did to the tests)."""
+        missing = [o for o in self.outcomes if o.comparison.startswith(NOT_COMPARED)]
+        if not missing:
+            return []
+        effect = "failed" if self.compare_missing == "fail" else "passed without a comparison; --sal-compare-missing=fail fails them"
+        return [f"{len(missing)} of {len(self.outcomes)} tests not compared with {self.compare!r} ({effect}): {missing[0].comparison[len(NOT_COMPARED):]}"]
 
     def finish(self) -> None:
         """Write the history and the reports (controller only)."""
@@ -305,17 +343,17 @@ class SalSession:
         from pytest_sal.history import commit_info, machine_info
 
         commit, dirty = commit_info(self.config.rootpath)
-        machine = machine_info()
+        machine = dict(machine_info(), load_avg_start=self.load_at_start)
         for outcome in self.outcomes:
             outcome.commit = commit + ("+dirty" if dirty else "")
-            outcome.machine = machine.get("hostname", "")
         from pytest_sal.report import write_html_report, write_markdown
         from sal_adapters.atomic import writing
         from sal_adapters.errors import WriteError
 
         option = self.config.option
+        name = self._save_name()
         writes = [
-            ("history", None if option.sal_no_history else self.history_dir, lambda: self.history.append_run(self.outcomes, name=option.sal_save)),
+            ("history", None if option.sal_no_history else self.history_dir, lambda: self.history.append_run(self.outcomes, name=name, machine=machine)),
             ("--sal-report-md", option.sal_report_md, lambda: write_markdown(self.outcomes, Path(option.sal_report_md))),
             ("--sal-report-html", option.sal_report_html, lambda: write_html_report(self.outcomes, Path(option.sal_report_html))),
         ]
@@ -327,3 +365,13 @@ class SalSession:
                     write()
             except WriteError as exc:
                 self.unwritten.append(f"{what} not written: {exc}")
+
+    def _save_name(self) -> str | None:
+        """``--sal-save``'s name, unless a test of this run failed the gate: a regressed run is
+        saved without the name, so it cannot replace the baseline (said in the summary)."""
+        name = self.config.option.sal_save
+        failed = [o for o in self.outcomes if o.regression]
+        if name and failed:
+            self.notes.append(f"this run is saved without the name {name!r}: {len(failed)} test(s) failed the --sal-compare gate, so it cannot become the baseline")
+            return None
+        return name

@@ -235,6 +235,18 @@ class SlamSystem:
         options, and the content of the files it runs (JSON-ready)."""
         return {"name": self.name, "version": self.version, "options": self.options()}
 
+    def version_text(self) -> str:
+        """What ran, in words, for the history and reports: the name, the versions its identity
+        names (a package's, the program's ``version=`` option) and ``#`` the first 8 hex digits
+        of the SHA-256 of the whole identity, which changes whenever a file, option or version
+        that decides results changes: ``orbslam3 (pyorbslam3 0.1.1) #3fa2c9d1``."""
+        identity = self.identity()
+        digest = hashlib.sha256(json.dumps(identity, sort_keys=True, default=str).encode()).hexdigest()[:8]
+        program = (identity.get("options") or {}).get("version")
+        named = [f"version {program}"] if isinstance(program, str) else []
+        named += [f"{key} {value}" for key, value in identity.items() if key not in ("name", "system") and isinstance(value, str)]
+        return f"{self.name} ({', '.join(named)}) #{digest}" if named else f"{self.name} #{digest}"
+
     def mode_for(self, sequence: Sequence, mode: str | None = None) -> str:
         """The sensor mode to run ``sequence`` in: ``mode`` if given, else the sequence's own
         sensor. Raises ``SlamSystemError`` when the system or the sequence cannot do it."""

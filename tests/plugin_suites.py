@@ -73,7 +73,7 @@ def write_tracked(pytester: pytest.Pytester, tracked: dict[str, Any]) -> None:
 def run(pytester: pytest.Pytester, mode: list[str], *args: str) -> pytest.RunResult:
     """The inner session with its own cache and history folders; ``-n 2`` in a subprocess.
     Hypothesis' plugin is left out: it costs every inner interpreter a second of CPU."""
-    options = ["-p", "no:cacheprovider", "-p", "no:hypothesispytest", "--sal-cache-dir", str(pytester.path / "cache"), "--sal-history-dir", str(pytester.path / "history"), *args]
+    options = ["-p", "no:cacheprovider", "-p", "no:hypothesispytest", f"--sal-cache-dir={pytester.path / 'cache'}", f"--sal-history-dir={pytester.path / 'history'}", *args]
     if mode:
         return pytester.runpytest_subprocess(*mode, *options, timeout=300)
     return pytester.runpytest(*options)

@@ -45,8 +45,8 @@ def test_a_full_disk_at_session_end_costs_only_the_outputs_it_hits(pytester: pyt
     pytester.makepyfile(test_suite=HEADER + TESTS)
     history, html, markdown = pytester.path / "history", pytester.path / "html", pytester.path / "md" / "report.md"
     monkeypatch.setenv("SAL_TEST_FULL", f"{history}:{html}")
-    options = ["-p", "no:cacheprovider", "-p", "no:hypothesispytest", "--sal-cache-dir", str(pytester.path / "cache"),
-               "--sal-history-dir", str(history), "--sal-report-html", str(html), "--sal-report-md", str(markdown)]
+    options = ["-p", "no:cacheprovider", "-p", "no:hypothesispytest", f"--sal-cache-dir={pytester.path / 'cache'}",
+               f"--sal-history-dir={history}", f"--sal-report-html={html}", f"--sal-report-md={markdown}"]
 
     full = pytester.runpytest_subprocess(*options, timeout=300)
 

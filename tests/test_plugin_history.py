@@ -64,7 +64,7 @@ def test_history_warm_start_and_compare_fail(pytester: pytest.Pytester, mode: li
 
     # run 2, SLAM runs again (no cache): the previous boundary still brackets -> 3 trials each
     before = calls(pytester)
-    second = run(pytester, mode, "--sal-no-cache", "--junitxml=second.xml")
+    second = run(pytester, mode, "--sal-no-cache", "--junitxml=second.xml", "--sal-save=main")
     second.assert_outcomes(passed=3)
     assert calls(pytester) - before == 3 * 3
     warm = outcomes(pytester.path / "second.xml")
@@ -72,9 +72,9 @@ def test_history_warm_start_and_compare_fail(pytester: pytest.Pytester, mode: li
         assert [t["value"] for t in outcome["trials"]] == [30, cold[name]["boundary"]["pass_value"], cold[name]["boundary"]["fail_value"]]
         assert outcome["boundary"] == cold[name]["boundary"] and outcome["termination"] == "tolerance"
         assert not any(t["cached"] for t in outcome["trials"])
-    assert len(runs_saved(pytester)) == 2
+    assert len(runs_saved(pytester)) == 2 and runs_saved(pytester)[1].endswith("_main.json")
 
-    # run 3: one fake got worse (boundary 23.75 m), one better (14.25 m), one is unchanged
+    # run 3 (bare --sal-compare: against the baseline named main): one fake got worse (boundary 23.75 m), one better (14.25 m), one is unchanged
     write_tracked(pytester, {"test_worse": "min(1, v / 50)", "test_better": "min(1, v / 30)", "test_same": "min(1, v / 40)"})
     third = run(pytester, mode, "-v", "--sal-compare", "--sal-compare-fail=boundary:10%", "--junitxml=third.xml")
     third.assert_outcomes(passed=2, failed=1)
@@ -102,20 +102,33 @@ def test_history_warm_start_and_compare_fail(pytester: pytest.Pytester, mode: li
     assert compared["test_better"]["boundary"]["pass_value"] < 15
     assert compared["test_same"]["boundary"] == warm["test_same"]["boundary"] and len(compared["test_same"]["trials"]) == 3
     has_line(third, "test_worse ", "REGRESSED", "FAILED")  # the summary table
+    for name in NAMES:
+        assert compared[name]["comparison"].startswith("main (run 0002"), compared[name]["comparison"]
     assert len(runs_saved(pytester)) == 3
+
+    # the same regressed commit again, against main and against 'last': the regressed run 3 is
+    # not a baseline, so retrying cannot pass the gate; and it cannot take the name main
+    for ref in ("", "=last"):
+        again = run(pytester, mode, f"--sal-compare{ref}", "--sal-compare-fail=boundary:10%", "--sal-save=main", "--junitxml=again.xml")
+        again.assert_outcomes(passed=2, failed=1)
+        assert outcomes(pytester.path / "again.xml")["test_worse"]["previous"] == warm["test_worse"]["boundary"]
+        again.stdout.fnmatch_lines(["pytest-sal: this run is saved without the name 'main': 1 test(s) failed the --sal-compare gate*"])
+    assert len(runs_saved(pytester)) == 5 and not any(p.endswith("_main.json") for p in runs_saved(pytester)[2:])
 
     # `sal history` lists every test of the folder
     capsys.readouterr()
     assert cli.main(["history", "--history-dir", str(pytester.path / "history")]) == 0
     listing = capsys.readouterr().out
-    assert "3 runs, 0001" in listing and "0003" in listing
+    assert "5 runs, 0001" in listing and "0005" in listing
     for name in NAMES:
         assert f"test_suite.py::{name}" in listing
     plot = pytester.path / "worse.png"
     assert cli.main(["history", "test_worse", "--history-dir", str(pytester.path / "history"), "-o", str(plot)]) == 0
     trend = capsys.readouterr().out
     assert "test_suite.py::test_worse" in trend and plot.is_file()
-    assert sum(line.startswith(("0001", "0002", "0003")) for line in trend.splitlines()) == 3, trend
+    assert sum(line.startswith(("0001", "0002", "0003", "0004", "0005")) for line in trend.splitlines()) == 5, trend
+    run_3 = next(line for line in trend.splitlines() if line.startswith("0003"))
+    assert "failed (regressed)" in run_3, run_3  # as pytest reported it
 
 
 def test_compare_against_a_named_run_and_no_history(pytester: pytest.Pytester) -> None:
@@ -130,7 +143,12 @@ def test_compare_against_a_named_run_and_no_history(pytester: pytest.Pytester) -
     result.assert_outcomes(failed=1)
     result.stdout.fnmatch_lines(["*regression: fog.visibility_m boundary moved toward the requirement*"])
     assert runs_saved(pytester) == [saved]
-    # a name that is no run is an error naming the known runs, not a silent "nothing to compare"
+    # a name that is no run is said, naming the known runs; --sal-compare-missing=fail fails it
     unknown = run(pytester, mode, "--sal-no-history", "--sal-compare=nightly")
-    assert unknown.ret != 0
-    has_line(unknown, "no run 'nightly' in the history", "0001 (baseline)")
+    unknown.assert_outcomes(passed=1)
+    has_line(unknown, "test_worse ", "no baseline", "passed")
+    has_line(unknown, "pytest-sal: 1 of 1 tests not compared with 'nightly' (passed without a comparison", "no run 'nightly' in the history", "0001 (baseline)")
+    strict = run(pytester, mode, "--sal-no-history", "--sal-compare=nightly", "--sal-compare-missing=fail")
+    strict.assert_outcomes(failed=1)
+    has_line(strict, "test_worse ", "NO BASELINE", "FAILED")
+    strict.stdout.fnmatch_lines(["*not compared: no run 'nightly' in the history*(--sal-compare-missing=fail)*"])

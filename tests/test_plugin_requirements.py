@@ -69,7 +69,7 @@ def test_fails_everywhere(sal_outcome):
 def test_verdicts_boundaries_summary_junit_and_reports(pytester: pytest.Pytester, mode: list[str]) -> None:
     # the default dataset (60 frames): the documented 19.38-20 m bracket
     project(pytester, VERDICT_TESTS, {"test_passes_everywhere": "1", "test_fails_everywhere": "0"}, small=False)
-    result = run(pytester, mode, "-v", "--junitxml=out.xml", "--sal-report-md", "summary.md", "--sal-report-html", "html")
+    result = run(pytester, mode, "-v", "--junitxml=out.xml", "--sal-report-md=summary.md", "--sal-report-html=html")
     result.assert_outcomes(passed=2, failed=2)
     assert "BODY-RAN" not in output(result)
 

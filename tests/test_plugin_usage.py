@@ -4,7 +4,7 @@ sessions, with and without ``-n 2``): every mistake is reported with what to wri
 from __future__ import annotations
 
 import pytest
-from plugin_suites import CONFTEST, HEADER, MODES, calls, run
+from plugin_suites import CONFTEST, HEADER, MODES, calls, has_line, run
 
 # -- misuse is reported with what to write instead ----------------------------------------
 IMPORT_ERRORS = {
@@ -141,15 +141,43 @@ def test_an_unusable_output_location_stops_the_session_before_any_run(pytester: 
     assert calls(pytester) == 0
 
 
-def test_compare_with_a_run_the_history_lacks_is_a_usage_error(pytester: pytest.Pytester) -> None:
+def test_a_missing_baseline_is_said_and_fails_only_when_asked(pytester: pytest.Pytester) -> None:
     pytester.makeconftest(CONFTEST)
     pytester.makepyfile(test_suite=HEADER + "@sal.require(tracking_rate >= 0.5, fog.visibility_m >= 25)\ndef test_x(sal_outcome): pass\n")
-    assert run(pytester, [], "--sal-compare=nightly").ret == pytest.ExitCode.OK  # no history yet: nothing to compare
+    empty = run(pytester, [], "--sal-compare")  # no history yet: nothing to compare, and it says so
+    assert empty.ret == pytest.ExitCode.OK
+    has_line(empty, "pytest-sal: 1 of 1 tests not compared with 'main'", f"no run 'main' in the history {pytester.path / 'history'}", "latest runs: none yet")
+    assert run(pytester, [], "--sal-compare", "--sal-compare-missing=fail").ret == pytest.ExitCode.TESTS_FAILED
+    pytester.makeini("[pytest]\nsal_compare_missing = fail\n")
+    assert run(pytester, [], "--sal-compare=nightly").ret == pytest.ExitCode.TESTS_FAILED  # the ini says fail
+    assert run(pytester, [], "--sal-compare=nightly", "--sal-compare-missing=pass").ret == pytest.ExitCode.OK  # the option wins
     assert run(pytester, [], "--sal-save=main").ret == pytest.ExitCode.OK
-    assert run(pytester, [], "--sal-compare=main").ret == pytest.ExitCode.OK
-    result = run(pytester, [], "--sal-compare=nightly")
+    assert run(pytester, [], "--sal-compare").ret == pytest.ExitCode.OK  # main exists now
+    pytester.makeini("[pytest]\nsal_compare_missing = maybe\n")
+    result = run(pytester, [], "--sal-compare")
     assert result.ret == pytest.ExitCode.USAGE_ERROR
-    result.stderr.fnmatch_lines(["ERROR: pytest-sal: --sal-compare=nightly: no run 'nightly' in the history *: give 'last', a run number, a run name or a commit prefix (latest runs: 0001, 0002 (main), 0003)"])
+    result.stderr.fnmatch_lines(["ERROR: pytest-sal: ini option sal_compare_missing = 'maybe': expected pass or fail"])
+
+
+@pytest.mark.parametrize("option", ["--sal-history-dir", "--sal-cache-dir", "--sal-report-md", "--sal-report-html"])
+def test_a_path_option_written_with_a_space_is_refused_with_the_reason(pytester: pytest.Pytester, option: str) -> None:
+    """With a space, pytest takes the path for a test path when it picks the rootdir and ini
+    file (before plugins load): the ini file would be ignored and node ids would change."""
+    pytester.makeconftest(CONFTEST)
+    pytester.makeini("[pytest]\nsal_runs = 1\n")
+    pytester.makepyfile(test_suite=HEADER + "@sal.require(tracking_rate >= 0.5, fog.visibility_m >= 25)\ndef test_x(sal_outcome): pass\n")
+    target = pytester.path.parent / "elsewhere"
+    target.mkdir(exist_ok=True)
+    result = pytester.runpytest("-p", "no:cacheprovider", option, str(target))
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    result.stderr.fnmatch_lines([f"ERROR: pytest-sal: write {option}={target} with '=': given as two words, pytest takes {target} for a test path*"])
+    assert calls(pytester) == 0
+    if option != "--sal-report-md":  # the same path with '=': the project's ini and test ids hold
+        kept = run(pytester, [], f"{option}={target}", "-v")
+        assert kept.ret == pytest.ExitCode.OK
+        kept.stdout.fnmatch_lines(["configfile: tox.ini", "test_suite.py::test_x PASSED*"])
+    # a name after a space is fine while no such path exists
+    assert run(pytester, [], "--sal-save", "nightly").ret == pytest.ExitCode.OK
 
 
 def test_more_orbslam3_workers_than_cores_is_said_at_the_start(pytester: pytest.Pytester, monkeypatch: pytest.MonkeyPatch) -> None:

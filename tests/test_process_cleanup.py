@@ -196,7 +196,7 @@ def test_a_killed_pytest_session_leaves_no_slam_process(tmp_path: Path, marker: 
     (tmp_path / "conftest.py").write_text(INNER_CONFTEST.format(marker=marker, what=what))
     (tmp_path / "test_inner.py").write_text(INNER_TEST)
     argv = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-p", "no:hypothesispytest",
-            "--sal-cache-dir", str(tmp_path / "cache"), "--sal-history-dir", str(tmp_path / "history")]
+            f"--sal-cache-dir={tmp_path / 'cache'}", f"--sal-history-dir={tmp_path / 'history'}"]
     session = start(argv, tmp_path, tmp_path / "pytest.log")
     try:
         wait_for(lambda: (tmp_path / "ready").exists() or session.poll() is not None, 60, "the SLAM program did not start")
