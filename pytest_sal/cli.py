@@ -18,6 +18,7 @@ from typing import Any
 
 from pytest_sal.boundary_command import add_boundary_commands
 from pytest_sal.cache_command import add_cache_commands
+from pytest_sal.compare_command import add_compare_commands
 from pytest_sal.cli_types import parse_key_values, positive_int
 from pytest_sal.evaluate_command import add_evaluate_commands
 from pytest_sal.features_command import add_features_commands
@@ -47,6 +48,11 @@ the paper's workflow, one YAML experiment (example_suites/configs/ has the table
   sal boundary example_suites/configs/urban_rain.yaml --slam reference_vo
   sal features example_suites/configs/urban_rain.yaml --features orb
   sal report   example_suites/configs/urban_rain.yaml             one HTML page of all of it
+
+the regression gate, on the run history that pytest sessions write (.sal/history):
+  sal history                                every test: latest boundary, change since the run before
+  sal compare main                           the last run against the baseline named main; exit 1 on a regression
+  sal history prune --keep 50                remove old runs (baselines are kept)
 
 Datasets are read in their own layouts (KITTI odometry, TUM RGB-D, EuRoC MAV, a folder of
 images) or rendered (the synthetic world: urban street canyon or indoor room). Rendered frames
@@ -101,6 +107,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_module_commands(commands)
     add_vocab_commands(commands)
     add_history_commands(commands)
+    add_compare_commands(commands)
     add_experiment_commands(commands)
     add_features_commands(commands)
     add_evaluate_commands(commands)

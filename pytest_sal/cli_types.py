@@ -10,7 +10,10 @@ from typing import Any
 
 from sal_adapters import SalError
 
-__all__ = ["add_cache_arguments", "add_slam_arguments", "parse_key_values", "positive_int", "positive_seconds"]
+__all__ = ["add_cache_arguments", "add_slam_arguments", "age_seconds", "parse_key_values", "positive_int", "positive_seconds"]
+
+#: seconds per unit of an age (``30d``, ``12h``, ``90m``, ``2w``, ``45s``)
+AGE_UNITS = {"s": 1.0, "m": 60.0, "h": 3600.0, "d": 86400.0, "w": 604800.0}
 
 
 def positive_int(text: str) -> int:
@@ -32,6 +35,18 @@ def positive_seconds(text: str) -> float:
         raise argparse.ArgumentTypeError(f"expected seconds, got {text!r}") from None
     if not math.isfinite(value) or value <= 0:
         raise argparse.ArgumentTypeError(f"expected seconds > 0, got {text}")
+    return value
+
+
+def age_seconds(text: str) -> float:
+    """argparse type: an age such as ``30d`` (s, m, h, d, w) in seconds, > 0."""
+    number, unit = text[:-1], text[-1:].lower()
+    try:
+        value = float(number) * AGE_UNITS[unit]
+    except (KeyError, ValueError):
+        raise argparse.ArgumentTypeError(f"expected an age such as 30d, 12h, 90m or 2w, got {text!r}") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"expected an age > 0, got {text!r}")
     return value
 
 

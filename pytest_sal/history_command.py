@@ -9,6 +9,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from pytest_sal.cli_types import age_seconds, positive_int
 from pytest_sal.gate import NOT_COMPARED
 from pytest_sal.history import DEFAULT_ROOT, History, OutcomeKey, RunRecord
 from pytest_sal.outcome import Outcome
@@ -17,7 +18,7 @@ from sal_adapters import SalError
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-__all__ = ["add_history_commands", "history_figure", "plot_history"]
+__all__ = ["add_history_commands", "change_text", "history_figure", "plot_history", "print_table", "verdict_text"]
 
 EPILOG = """\
 examples:
@@ -25,6 +26,11 @@ examples:
   sal history test_fog                          one test (a node id, or part of one): each run and a plot
   sal history test_fog --system orbslam3 -o fog.png
   sal history --history-dir ci-runs/.sal/history
+  sal history prune --keep 20                   remove all but the newest 20 runs
+  sal history prune --older-than 30d --dry-run  list the runs older than 30 days
+
+Prune never removes the newest run of each name (a baseline saved with --sal-save=main
+survives) nor the newest run.
 
 Runs are saved by pytest-sal sessions under .sal/history (one JSON file per session run).
 """
@@ -49,10 +55,30 @@ def add_history_commands(commands: argparse._SubParsersAction) -> None:
     history.add_argument("--system", metavar="S", help="only outcomes of this SLAM system")
     history.add_argument("--dataset", metavar="D", help="only outcomes on this dataset")
     history.add_argument("-o", "--out", type=Path, metavar="PNG", help="plot file (default: sal-history-<test>.png)")
+    prune = history.add_argument_group("sal history prune", "remove old runs: those beyond the newest N, those older than AGE, "
+                                       "or (both given) those that are both; each name's newest run and the newest run stay")
+    prune.add_argument("--keep", type=positive_int, metavar="N", help="keep the newest N runs")
+    prune.add_argument("--older-than", type=age_seconds, metavar="AGE", help="remove runs written more than AGE ago: 30d, 12h, 2w")
+    prune.add_argument("--dry-run", action="store_true", help="list what would be removed, remove nothing")
     history.set_defaults(run=_run_history)
 
 
+def _run_prune(args: argparse.Namespace) -> int:
+    history = History(args.history_dir)
+    before = history.runs()
+    removed = history.prune(keep=args.keep, older_than_s=args.older_than, dry_run=args.dry_run)
+    verb = "would remove" if args.dry_run else "removed"
+    for run in removed:
+        print(f"{verb} {run.path.name}" + (f" (name {run.name})" if run.name else ""))
+    print(f"{args.history_dir}: {verb} {len(removed)} of {len(before)} runs; {len(before) - len(removed)} kept")
+    return 0
+
+
 def _run_history(args: argparse.Namespace) -> int:
+    if args.test == "prune":
+        return _run_prune(args)
+    if args.keep is not None or args.older_than is not None or args.dry_run:
+        raise SalError("--keep, --older-than and --dry-run belong to sal history prune")
     history = History(args.history_dir)
     runs = history.runs()
     if not runs:
@@ -105,8 +131,8 @@ def _print_listing(history: History, runs: list[RunRecord], keys: list[OutcomeKe
         trend = [(r, o) for r, o in ((r, r.get(key)) for r in runs) if o is not None]
         run, latest = trend[-1]
         before = trend[-2][1] if len(trend) > 1 else None
-        rows.append((key[0], key[1], key[2], run.label, latest.boundary.text(), _verdict(latest), _change(before, latest)))
-    _print_table(rows)
+        rows.append((key[0], key[1], key[2], run.label, latest.boundary.text(), verdict_text(latest), change_text(before, latest)))
+    print_table(rows)
 
 
 def _print_trend(test_id: str, system: str, dataset: str, trend: list[tuple[RunRecord, Outcome]]) -> None:
@@ -123,17 +149,17 @@ def _print_trend(test_id: str, system: str, dataset: str, trend: list[tuple[RunR
             notes.append(f"searched {outcome.parameter}")
         if outcome.regression:
             notes.append(f"regression: {outcome.regression}")
-        rows.append((run.label, commit, _date(run, minutes=True), outcome.boundary.text(), _verdict(outcome), trials, "; ".join(notes)))
-    _print_table(rows)
+        rows.append((run.label, commit, _date(run, minutes=True), outcome.boundary.text(), verdict_text(outcome), trials, "; ".join(notes)))
+    print_table(rows)
 
 
-def _print_table(rows: list[tuple[str, ...]]) -> None:
+def print_table(rows: list[tuple[str, ...]]) -> None:
     widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
     for row in rows:
         print("  ".join(cell.ljust(width) for cell, width in zip(row, widths)).rstrip())
 
 
-def _verdict(outcome: Outcome) -> str:
+def verdict_text(outcome: Outcome) -> str:
     """The verdict pytest reported: a test the regression gate failed is ``failed (regressed)``
     (or ``failed (not compared)`` under ``--sal-compare-missing=fail``) even when its
     requirement held."""
@@ -150,7 +176,7 @@ def _date(run: RunRecord, minutes: bool = False) -> str:
     return created.strftime("%Y-%m-%d %H:%M" if minutes else "%Y-%m-%d")
 
 
-def _change(before: Outcome | None, now: Outcome) -> str:
+def change_text(before: Outcome | None, now: Outcome) -> str:
     """The pass value's move since ``before``, with whether that is better or worse."""
     if before is None:
         return "first run"
