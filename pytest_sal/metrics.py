@@ -35,6 +35,7 @@ __all__ = [
     "associate",
     "ate",
     "default_max_diff",
+    "relative_errors",
     "evaluate",
     "rpe",
     "scale_error",
@@ -238,7 +239,7 @@ def rpe(
         ids = _time_pairs(pair.reference.timestamps, delta)
         if len(ids) == 0:
             raise SalError(f"RPE: the trajectory spans less than delta = {delta} s")
-        trans, rot = _relative_errors(ref.poses_se3, est.poses_se3, ids)
+        trans, rot = relative_errors(ref.poses_se3, est.poses_se3, ids)
         stamps = pair.reference.timestamps[ids[:, 1]]
     else:
         trans, rot, stamps = _evo_rpe(ref, est, delta, unit)
@@ -470,8 +471,10 @@ def _time_pairs(stamps: np.ndarray, delta: float) -> np.ndarray:
     return np.column_stack([ids[:-1], ids[1:]]).astype(int) if len(ids) > 1 else np.zeros((0, 2), dtype=int)
 
 
-def _relative_errors(ref_poses: list[np.ndarray], est_poses: list[np.ndarray], ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Translation (m) and rotation (deg) of ``E = (Q_i^-1 Q_j)^-1 (P_i^-1 P_j)`` per pair."""
+def relative_errors(ref_poses: list[np.ndarray] | np.ndarray, est_poses: list[np.ndarray] | np.ndarray, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Translation (m) and rotation (deg) of ``E = (Q_i^-1 Q_j)^-1 (P_i^-1 P_j)`` per index pair
+    ``(i, j)`` of ``ids`` (``Q`` reference, ``P`` estimate, 4x4 poses). The KITTI devkit's
+    ``pose_error`` is ``E^-1``: the same translation norm and rotation angle."""
     q, p = np.asarray(ref_poses), np.asarray(est_poses)
     i, j = ids[:, 0], ids[:, 1]
     q_rel = np.linalg.inv(q[i]) @ q[j]
