@@ -84,10 +84,11 @@ def _ini_segments(config: pytest.Config) -> tuple[float, ...]:
     from pytest_sal.kitti_metrics import parse_segments
     from sal_adapters import SalError
 
+    text = str(config.getini("sal_kitti_segments")).strip()
     try:
-        return parse_segments(str(config.getini("sal_kitti_segments")))
-    except SalError as exc:
-        raise pytest.UsageError(f"pytest-sal: ini option sal_kitti_segments: {exc}") from None
+        return parse_segments(text)
+    except SalError:
+        raise pytest.UsageError(f"pytest-sal: ini option sal_kitti_segments = {text!r}: expected lengths > 0 (m) separated by commas, e.g. 10,20,30,40") from None
 
 
 def _ini_size(text: str) -> int:
