@@ -111,7 +111,7 @@ t_rel = Metric("t_rel", "%", "lower", "KITTI translation error: mean over segmen
 r_rel = Metric("r_rel", "deg/100m", "lower", "KITTI rotation error: mean over segments (ini sal_kitti_segments) of angle / length")
 
 #: Metrics by name.
-METRICS: dict[str, Metric] = {m.name: m for m in (ate_rmse, rpe_trans, rpe_rot, t_rel, r_rel, tracking_rate, scale_error)}
+METRICS: dict[str, Metric] = {m.name: m for m in (ate_rmse, rpe_trans, rpe_rot, tracking_rate, scale_error, t_rel, r_rel)}
 
 
 @dataclass(frozen=True, eq=False)

@@ -21,7 +21,9 @@ from pytest_sal.kitti_metrics import (
     trajectory_distances,
 )
 from pytest_sal.metrics import AGGREGATED, evaluate
+from pytest_sal.outcome import Boundary, Outcome, Trial
 from pytest_sal.requirements import METRICS, Requirement, r_rel, t_rel
+from pytest_sal.robustness import failure_message
 from sal_adapters.errors import SalError
 from sal_adapters.trajectory import Trajectory
 from sal_modules import fog
@@ -282,3 +284,15 @@ def test_the_yaml_evaluation_section_sets_the_segment_lengths() -> None:
         assert str(error.value).startswith(message)
     with pytest.raises(ConfigError, match="evaluation.segments: unknown key; known: kitti_segments_m"):
         parse_config(YAML + "evaluation: {segments: [10]}\n")
+
+
+def test_a_failed_test_says_why_its_kitti_metric_is_missing() -> None:
+    why = "the reference path is 58.7 m, too short for a segment of 100 m (KITTI segment lengths 100, 200, 300, 400, 500, 600, 700, 800 m)"
+    metrics = {"ate_rmse": 0.2, "tracking_rate": 1.0, "t_rel": None, "r_rel": None, "kitti_missing": why, "failures": []}
+    trial = Trial(25.0, False, metrics, failed=["t_rel < 5 %"])
+    outcome = Outcome(
+        test_id="t", system="fake", dataset="urban", parameter="fog.visibility_m", worse="lower", edge=25.0,
+        requirement="t_rel < 5 % wherever fog.visibility_m >= 25 m", criteria=[("t_rel", "<", 5.0)], envelope=">= 25 m",
+        verdict="failed", boundary=Boundary(None, 25.0, "m"), termination="edge failed", trials=[trial],
+    )
+    assert f"at fog.visibility_m = 25 m: ate_rmse 0.2, tracking_rate 1, t_rel missing: {why}; failed: t_rel < 5 %" in failure_message(outcome)
