@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from plugin_suites import project, run
 from scipy.spatial.transform import Rotation
 
 from pytest_sal.experiment import ConfigError, parse_config
@@ -296,3 +297,14 @@ def test_a_failed_test_says_why_its_kitti_metric_is_missing() -> None:
         verdict="failed", boundary=Boundary(None, 25.0, "m"), termination="edge failed", trials=[trial],
     )
     assert f"at fog.visibility_m = 25 m: ate_rmse 0.2, tracking_rate 1, t_rel missing: {why}; failed: t_rel < 5 %" in failure_message(outcome)
+
+
+def test_the_ini_segments_reach_the_plugins_trials(pytester: pytest.Pytester) -> None:
+    """The 20-frame street is 19 m long: t_rel is missing with the devkit's lengths (the test
+    fails, saying why) and scored with ``sal_kitti_segments = 5,10`` (the fake tracks it exactly)."""
+    project(pytester, "from pytest_sal.requirements import t_rel  # pytest_sal exports it once __init__ lists it\n\n@sal.at(fog.visibility_m, 100)\n@sal.require(t_rel < 5)\ndef test_kitti(sal_trial):\n    pass\n")
+    missing = run(pytester, [])
+    missing.assert_outcomes(failed=1)
+    missing.stdout.fnmatch_lines(["*t_rel missing: the reference path is * m, too short for a segment of 100 m*failed: t_rel < 5 %*"])
+    scored = run(pytester, [], "-o", "sal_kitti_segments=5,10")
+    scored.assert_outcomes(passed=1)
