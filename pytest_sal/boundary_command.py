@@ -135,6 +135,7 @@ def run_boundary(
         build_sequence,
         load_config,
     )
+    from pytest_sal.kitti_metrics import KITTI_SEGMENTS_M
     from pytest_sal.report_html import metric_plot
     from pytest_sal.requirements import Requirement, ate_rmse, tracking_rate
     from pytest_sal.robustness import SearchSettings, search_outcome
@@ -166,7 +167,7 @@ def run_boundary(
     cache = command_cache(cache_dir) if use_cache else None
     runner = TrialRunner(
         clean, ref, system, requirement, runs=runs, seed=config.experiment.seed, cache=cache, workdir=folder / "runs", timeout=timeout,
-        progress=_progress_printer(ref.unit, out),
+        progress=_progress_printer(ref.unit, out), kitti_segments=config.evaluation.kitti_segments_m or KITTI_SEGMENTS_M,
     )
     unit = ref.unit
     unit_text = f" {unit}" if unit else ""

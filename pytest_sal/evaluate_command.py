@@ -47,7 +47,7 @@ from sal_adapters.trajectory import Trajectory
 __all__ = ["SUMMARY_METRICS", "add_evaluate_commands", "run_evaluate"]
 
 #: metrics summarised over runs in summary.json
-SUMMARY_METRICS = ("ate_rmse", "rpe_trans", "rpe_rot", "tracking_rate")
+SUMMARY_METRICS = ("ate_rmse", "rpe_trans", "rpe_rot", "t_rel", "r_rel", "tracking_rate")
 
 EPILOG = """\
 examples:
@@ -70,7 +70,8 @@ def add_evaluate_commands(commands: argparse._SubParsersAction) -> None:
         help="run a SLAM system on the clean and each perturbed sequence, N runs, and score them",
         description="Run a SLAM system on the clean sequence (the baseline, once per run) and on each enabled\n"
         "perturbation of the experiment config, score every run against the ground truth (ATE, RPE,\n"
-        "tracking rate) and compare it with the baseline of the same run.",
+        "KITTI t_rel / r_rel over the segments of evaluation.kitti_segments_m, tracking rate) and compare\n"
+        "it with the baseline of the same run.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -132,7 +133,7 @@ def run_evaluate(
                 start = time.perf_counter()
                 result = _run_system(system, sequence, workdir, timeout)
                 seconds = time.perf_counter() - start
-                metrics = _score(result, groundtruth)
+                metrics = _score(result, groundtruth, config.evaluation.kitti_segments_m)
                 run_metrics[name] = metrics
                 all_metrics[name].append(metrics)
                 if result.trajectory is not None and len(result.trajectory):
@@ -173,10 +174,10 @@ def _run_system(system: Any, sequence: Any, workdir: Path, timeout: float | None
         )
 
 
-def _score(result: Any, groundtruth: Trajectory | None) -> Any:
+def _score(result: Any, groundtruth: Trajectory | None, kitti_segments: tuple[float, ...] | None) -> Any:
     from pytest_sal.metrics import evaluate
 
-    return evaluate(result, groundtruth)
+    return evaluate(result, groundtruth, kitti_segments=kitti_segments)
 
 
 def _baseline_trajectory(root: Path, k: int) -> Trajectory | None:
@@ -243,6 +244,8 @@ def _vs_baseline(p: Any, b: Any, result: Any, *, baseline_traj: Trajectory | Non
         "baseline_failure": b.failure,
         "ate_rmse": {"baseline": b.ate_rmse, "perturbed": p.ate_rmse, "ratio": ratio(p.ate_rmse, b.ate_rmse), "difference": diff(p.ate_rmse, b.ate_rmse)},
         "rpe_trans": {"baseline": b.rpe_trans, "perturbed": p.rpe_trans, "ratio": ratio(p.rpe_trans, b.rpe_trans), "difference": diff(p.rpe_trans, b.rpe_trans)},
+        "t_rel": {"baseline": b.t_rel, "perturbed": p.t_rel, "ratio": ratio(p.t_rel, b.t_rel), "difference": diff(p.t_rel, b.t_rel)},
+        "r_rel": {"baseline": b.r_rel, "perturbed": p.r_rel, "ratio": ratio(p.r_rel, b.r_rel), "difference": diff(p.r_rel, b.r_rel)},
         "tracking_rate": {
             "baseline": b.tracking_rate, "perturbed": p.tracking_rate,
             "ratio": ratio(p.tracking_rate, b.tracking_rate), "difference": diff(p.tracking_rate, b.tracking_rate),
@@ -257,12 +260,15 @@ def _vs_baseline(p: Any, b: Any, result: Any, *, baseline_traj: Trajectory | Non
 
 
 def _summary(all_metrics: dict[str, list[Any]], slam: str, system: Any, config: Any, clean: Any, runs: int) -> dict[str, Any]:
+    from pytest_sal.kitti_metrics import KITTI_SEGMENTS_M
+
     entries: dict[str, Any] = {}
     for name, ms in all_metrics.items():
         entry: dict[str, Any] = {
             "runs": len(ms),
             "failures": sum(1 for m in ms if m.failure is not None),
             "failure_reasons": [{"run": i, "reason": m.failure} for i, m in enumerate(ms, 1) if m.failure is not None],
+            "kitti_missing": [{"run": i, "reason": m.kitti_missing} for i, m in enumerate(ms, 1) if m.kitti_missing is not None],
         }
         for metric in SUMMARY_METRICS:
             values = [float(v) for v in (getattr(m, metric) for m in ms) if v is not None and math.isfinite(float(v))]
@@ -281,6 +287,7 @@ def _summary(all_metrics: dict[str, list[Any]], slam: str, system: Any, config: 
         "run_count": runs,
         "order": list(all_metrics),
         "std": "population (ddof=0)",
+        "kitti_segments_m": list(config.evaluation.kitti_segments_m or KITTI_SEGMENTS_M),
         "baseline": entries[BASELINE],
         "perturbations": {k: v for k, v in entries.items() if k != BASELINE},
     }
@@ -378,12 +385,21 @@ def _progress(name: str, k: int, runs: int, m: Any, seconds: float) -> str:
 
 
 def _table(summary: dict[str, Any]) -> str:
-    rows = [f"{'sequence':20s} {'ok':>5s} {'ATE median':>11s} {'ATE min':>9s} {'ATE max':>9s} {'RPE trans':>10s} {'tracked':>8s}"]
+    """Medians over runs: ATE (m), RPE (m/m), KITTI t_rel (%) and r_rel (deg/100m), tracking rate."""
+    rows = [
+        f"{'sequence':20s} {'ok':>5s} {'ATE median':>11s} {'ATE min':>9s} {'ATE max':>9s} {'RPE trans':>10s} "
+        f"{'t_rel %':>8s} {'r_rel deg/100m':>14s} {'tracked':>8s}"
+    ]
     for name, e in {BASELINE: summary["baseline"], **summary["perturbations"]}.items():
         rows.append(
             f"{name:20s} {e['runs'] - e['failures']:>2d}/{e['runs']:<2d} {_fmt(e['ate_rmse']['median']):>11s} {_fmt(e['ate_rmse']['min']):>9s} "
-            f"{_fmt(e['ate_rmse']['max']):>9s} {_fmt(e['rpe_trans']['median']):>10s} {_fmt(e['tracking_rate']['median'], '.1%'):>8s}"
+            f"{_fmt(e['ate_rmse']['max']):>9s} {_fmt(e['rpe_trans']['median']):>10s} {_fmt(e['t_rel']['median'], '.3f'):>8s} "
+            f"{_fmt(e['r_rel']['median'], '.3f'):>14s} {_fmt(e['tracking_rate']['median'], '.1%'):>8s}"
         )
+    rows.append(f"t_rel / r_rel: KITTI segments of {', '.join(f'{v:g}' for v in summary['kitti_segments_m'])} m")
+    for name, e in {BASELINE: summary["baseline"], **summary["perturbations"]}.items():
+        if e["kitti_missing"]:
+            rows.append(f"{name}: t_rel / r_rel missing in {len(e['kitti_missing'])} run(s): {e['kitti_missing'][0]['reason']}")
     return "\n".join(rows)
 
 

@@ -42,6 +42,7 @@ __all__ = [
     "BoundaryConfig",
     "ConfigError",
     "DatasetConfig",
+    "EvaluationConfig",
     "ExperimentConfig",
     "ExperimentInfo",
     "OutputConfig",
@@ -126,6 +127,14 @@ class BoundaryConfig:
 
 
 @dataclass(frozen=True)
+class EvaluationConfig:
+    """How ``sal evaluate`` and ``sal boundary`` score runs: ``kitti_segments_m``, the segment
+    lengths (m) of KITTI's ``t_rel`` / ``r_rel`` (``None``: the devkit's 100 .. 800 m)."""
+
+    kitti_segments_m: tuple[float, ...] | None = None
+
+
+@dataclass(frozen=True)
 class ExperimentConfig:
     source: str
     experiment: ExperimentInfo
@@ -134,6 +143,7 @@ class ExperimentConfig:
     output: OutputConfig
     robustness_boundary: BoundaryConfig | None = None
     text: str = ""  # the config file as read (copied into the output)
+    evaluation: EvaluationConfig = field(default_factory=EvaluationConfig)
 
     def output_dir(self, now: datetime | None = None) -> Path:
         """``<base_dir>/<experiment.name>[_<timestamp>]``."""
@@ -148,7 +158,8 @@ class ExperimentConfig:
 
 # ------------------------------------------------------------------------------ loading
 
-_TOP = ("experiment", "dataset", "perturbations", "output", "robustness_boundary")
+_TOP = ("experiment", "dataset", "perturbations", "output", "robustness_boundary", "evaluation")
+_EVALUATION = ("kitti_segments_m",)
 _EXPERIMENT = ("name", "description", "version", "seed")
 _DATASET = ("type", "path", "sequence", "max_frames", "start", "stereo", "options")
 _PERTURBATION = ("name", "type", "enabled", "parameters")
@@ -172,6 +183,8 @@ MAX_PATH_BYTES = 4096
 MAX_NAME_BYTES = 255
 #: Trials of a boundary search (bisection: 64 halvings reach a double's precision).
 MAX_SEARCH_TRIALS = 100
+#: Segment lengths of the KITTI metrics (the devkit has 8).
+MAX_KITTI_SEGMENTS = 100
 
 
 def load_config(path: str | os.PathLike[str]) -> ExperimentConfig:
@@ -374,7 +387,8 @@ class _Parser:
         perturbations = self.perturbations(top.get("perturbations"))
         output = self.output(top.get("output"))
         boundary = self.boundary(top.get("robustness_boundary"), perturbations)
-        return ExperimentConfig(self.source, experiment, dataset, perturbations, output, boundary, text)
+        evaluation = self.evaluation(top.get("evaluation"))
+        return ExperimentConfig(self.source, experiment, dataset, perturbations, output, boundary, text, evaluation)
 
     def experiment(self, value: Any) -> ExperimentInfo:
         d = self.mapping(value, "experiment", _EXPERIMENT, required=("name",))
@@ -518,6 +532,18 @@ class _Parser:
             base_dir=self.folder(d.get("base_dir", "results"), "output.base_dir"),
             create_timestamp_dir=self.typed(d.get("create_timestamp_dir", False), "output.create_timestamp_dir", "bool"),
         )
+
+    def evaluation(self, value: Any) -> EvaluationConfig:
+        d = self.mapping(value if value is not None else {}, "evaluation", _EVALUATION)
+        segments = d.get("kitti_segments_m")
+        if segments is None:
+            return EvaluationConfig()
+        where = "evaluation.kitti_segments_m"
+        if not isinstance(segments, list) or not segments or not all(_is_finite(v) and v > 0 for v in segments):
+            raise self.error(where, f"{quote(segments)} is not valid; must be a list of segment lengths > 0 m, e.g. [10, 20, 30, 40]")
+        if len(segments) > MAX_KITTI_SEGMENTS:
+            raise self.error(where, f"{len(segments)} lengths; the limit is {MAX_KITTI_SEGMENTS}")
+        return EvaluationConfig(tuple(sorted({float(v) for v in segments})))
 
     def boundary(self, value: Any, perturbations: tuple[PerturbationConfig, ...]) -> BoundaryConfig | None:
         if value is None:

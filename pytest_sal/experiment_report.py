@@ -43,6 +43,8 @@ SLAM_COLUMNS = (
     ("ate_rmse", "ATE RMSE", ".4f"),
     ("rpe_trans", "RPE trans", ".4f"),
     ("rpe_rot", "RPE rot", ".3f"),
+    ("t_rel", "KITTI t_rel", ".3f"),
+    ("r_rel", "KITTI r_rel", ".3f"),
     ("tracking_rate", "tracked", ".1%"),
 )
 CLEAN = "baseline"

@@ -1,4 +1,5 @@
-"""Trajectory accuracy of a SLAM run: association, ATE, RPE, scale error, per-run metrics.
+"""Trajectory accuracy of a SLAM run: association, ATE, RPE, scale error, per-run metrics
+(KITTI's ``t_rel`` / ``r_rel`` are in ``pytest_sal.kitti_metrics``).
 
 The numbers are evo's (``evo.main_ape.ape`` / ``evo.main_rpe.rpe``), so they agree with the
 ``evo_ape`` / ``evo_rpe`` command line. evo aligns its estimate *in place*: every function here
@@ -12,6 +13,7 @@ unobservable) or ``"none"``.
 from __future__ import annotations
 
 import copy
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal, NamedTuple, get_args
 
@@ -35,6 +37,7 @@ __all__ = [
     "associate",
     "ate",
     "default_max_diff",
+    "relative_errors",
     "evaluate",
     "rpe",
     "scale_error",
@@ -48,7 +51,7 @@ MIN_POSES = 3
 #: smallest default association tolerance (s), evo's own default
 MIN_MAX_DIFF = 0.01
 #: ``RunMetrics`` fields that ``aggregate`` summarises
-AGGREGATED = ("ate_rmse", "rpe_trans", "rpe_rot", "scale_error", "tracking_rate", "first_tracked", "maps", "matched")
+AGGREGATED = ("ate_rmse", "rpe_trans", "rpe_rot", "t_rel", "r_rel", "scale_error", "tracking_rate", "first_tracked", "maps", "matched")
 
 
 class Association(NamedTuple):
@@ -238,7 +241,7 @@ def rpe(
         ids = _time_pairs(pair.reference.timestamps, delta)
         if len(ids) == 0:
             raise SalError(f"RPE: the trajectory spans less than delta = {delta} s")
-        trans, rot = _relative_errors(ref.poses_se3, est.poses_se3, ids)
+        trans, rot = relative_errors(ref.poses_se3, est.poses_se3, ids)
         stamps = pair.reference.timestamps[ids[:, 1]]
     else:
         trans, rot, stamps = _evo_rpe(ref, est, delta, unit)
@@ -278,6 +281,12 @@ class RunMetrics:
     ``MIN_POSES`` tracked poses. ``failure`` says why a run failed (the system's own reason,
     too few poses, nothing associated); a run that wrote its trajectory before it crashed has
     both its accuracy values and its ``failure``. ``ate`` keeps the full ATE for plots.
+
+    ``t_rel`` (%) and ``r_rel`` (deg/100 m) are KITTI's odometry errors
+    (``pytest_sal.kitti_metrics``) over ``kitti_segments`` segments of the lengths
+    ``kitti_segments_m`` (m), on the estimate aligned as for the ATE; ``kitti_missing`` says
+    why they are ``None`` when the run was scored (path shorter than the shortest segment,
+    no segment with an estimate at both ends).
     """
 
     system: str
@@ -294,6 +303,11 @@ class RunMetrics:
     ate_rmse: float | None = None
     rpe_trans: float | None = None
     rpe_rot: float | None = None
+    t_rel: float | None = None
+    r_rel: float | None = None
+    kitti_segments_m: tuple[float, ...] = ()
+    kitti_segments: int = 0
+    kitti_missing: str | None = None
     rpe_delta: float = 1.0
     rpe_unit: str = "m"
     scale: float | None = None
@@ -319,6 +333,7 @@ def evaluate(
     rpe_delta: float = 1.0,
     rpe_unit: RpeUnit = "m",
     max_diff: float | None = None,
+    kitti_segments: Sequence[float] | None = None,
 ) -> RunMetrics:
     """Score ``result.trajectory`` against ``groundtruth``; never raises for a failed run.
 
@@ -329,7 +344,12 @@ def evaluate(
     when the trajectory is shorter than ``rpe_delta``. A run whose system wrote its trajectory
     before it failed (``info["written_before_failure"]``: a program that crashed at shutdown) is
     scored all the same and keeps ``failure``: the requirement judges its metrics.
+    ``kitti_segments`` (m, default the devkit's 100 .. 800) are the segment lengths of
+    ``t_rel`` / ``r_rel``, computed on the ATE's aligned estimate (see ``RunMetrics``).
     """
+    from pytest_sal.kitti_metrics import KITTI_SEGMENTS_M, kitti_from_ate, segment_lengths  # it imports this module
+
+    lengths = segment_lengths(KITTI_SEGMENTS_M if kitti_segments is None else kitti_segments)
     align = align or ("sim3" if result.sensor == "mono" else "se3")
     base = dict(
         system=result.system,
@@ -344,6 +364,7 @@ def evaluate(
         maps=result.maps,
         rpe_delta=float(rpe_delta),
         rpe_unit=rpe_unit,
+        kitti_segments_m=lengths,
         has_groundtruth=groundtruth is not None,
     )
     poses = 0 if result.trajectory is None else len(result.trajectory)
@@ -366,12 +387,17 @@ def evaluate(
     mono_scale_error = None
     if result.sensor == "mono":
         mono_scale_error = abs(1.0 - scale) if scale is not None else scale_error(result.trajectory, groundtruth, max_diff=absolute.max_diff)
+    kitti = kitti_from_ate(absolute, groundtruth, segments_m=lengths)
     return RunMetrics(
         **base,
         matched=absolute.matched,
         ate_rmse=absolute.rmse,
         rpe_trans=None if relative is None else relative.trans.rmse,
         rpe_rot=None if relative is None else relative.rot.rmse,
+        t_rel=kitti.t_rel,
+        r_rel=kitti.r_rel,
+        kitti_segments=kitti.count,
+        kitti_missing=kitti.reason,
         scale=scale,
         scale_error=mono_scale_error,
         failure=result.failure,
@@ -470,8 +496,10 @@ def _time_pairs(stamps: np.ndarray, delta: float) -> np.ndarray:
     return np.column_stack([ids[:-1], ids[1:]]).astype(int) if len(ids) > 1 else np.zeros((0, 2), dtype=int)
 
 
-def _relative_errors(ref_poses: list[np.ndarray], est_poses: list[np.ndarray], ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Translation (m) and rotation (deg) of ``E = (Q_i^-1 Q_j)^-1 (P_i^-1 P_j)`` per pair."""
+def relative_errors(ref_poses: list[np.ndarray] | np.ndarray, est_poses: list[np.ndarray] | np.ndarray, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Translation (m) and rotation (deg) of ``E = (Q_i^-1 Q_j)^-1 (P_i^-1 P_j)`` per index pair
+    ``(i, j)`` of ``ids`` (``Q`` reference, ``P`` estimate, 4x4 poses). The KITTI devkit's
+    ``pose_error`` is ``E^-1``: the same translation norm and rotation angle."""
     q, p = np.asarray(ref_poses), np.asarray(est_poses)
     i, j = ids[:, 0], ids[:, 1]
     q_rel = np.linalg.inv(q[i]) @ q[j]

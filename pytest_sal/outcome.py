@@ -22,8 +22,9 @@ class Trial:
         value: the searched parameter's value (its declared unit).
         passed: the majority of runs met every criterion (a tie fails).
         metrics: aggregated metrics (median over runs): ``ate_rmse``, ``rpe_trans``,
-            ``rpe_rot``, ``tracking_rate``, ``scale_error``, ``first_tracked``, ``maps``
-            (``None`` where not available).
+            ``rpe_rot``, ``t_rel``, ``r_rel``, ``tracking_rate``, ``scale_error``,
+            ``first_tracked``, ``maps`` (``None`` where not available; ``kitti_missing`` says
+            why ``t_rel`` / ``r_rel`` are).
         runs: per-run metrics (``RunMetrics.to_dict()``), failure reasons included, with
             ``passed`` (that run met every criterion) and ``cached``.
         cached: every run came from the cache (no SLAM run).

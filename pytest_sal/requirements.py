@@ -31,8 +31,10 @@ __all__ = [
     "Requirement",
     "ate_rmse",
     "rpe_rot",
+    "r_rel",
     "rpe_trans",
     "scale_error",
+    "t_rel",
     "tracking_rate",
 ]
 
@@ -105,9 +107,11 @@ rpe_trans = Metric("rpe_trans", "m/m", "lower", "relative translation error per 
 rpe_rot = Metric("rpe_rot", "deg/m", "lower", "relative rotation error per metre travelled (RMSE)")
 tracking_rate = Metric("tracking_rate", "", "higher", "frames with a valid pose / frames given", highest=1.0)
 scale_error = Metric("scale_error", "", "lower", "|1 - s| of the Sim(3) alignment (mono)")
+t_rel = Metric("t_rel", "%", "lower", "KITTI translation error: mean over segments (ini sal_kitti_segments) of drift / length")
+r_rel = Metric("r_rel", "deg/100m", "lower", "KITTI rotation error: mean over segments (ini sal_kitti_segments) of angle / length")
 
 #: Metrics by name.
-METRICS: dict[str, Metric] = {m.name: m for m in (ate_rmse, rpe_trans, rpe_rot, tracking_rate, scale_error)}
+METRICS: dict[str, Metric] = {m.name: m for m in (ate_rmse, rpe_trans, rpe_rot, tracking_rate, scale_error, t_rel, r_rel)}
 
 
 @dataclass(frozen=True, eq=False)

@@ -125,12 +125,16 @@ def _outcome(
     )
 
 
-def _metrics_text(metrics: dict[str, Any]) -> str:
+def _metrics_text(metrics: dict[str, Any], judged: tuple[str, ...] = ()) -> str:
+    """The trial's main metrics and those ``judged`` by a criterion; a judged KITTI metric
+    that is missing says why (the sequence is shorter than the shortest segment...)."""
     shown = []
-    for name in ("ate_rmse", "tracking_rate", "rpe_trans", "scale_error"):
+    for name in dict.fromkeys(("ate_rmse", "tracking_rate", "rpe_trans", "scale_error", *judged)):
         value = metrics.get(name)
         if value is not None:
             shown.append(f"{name} {value:.4g}")
+        elif name in ("t_rel", "r_rel") and metrics.get("kitti_missing"):
+            shown.append(f"{name} missing: {metrics['kitti_missing']}")
     failures = metrics.get("failures") or []
     if failures:
         shown.append(f"run failed: {failures[0]}")
@@ -142,6 +146,7 @@ def failure_message(outcome: Outcome) -> str:
     boundary, the metrics at both ends and a one-line reproduction."""
     unit = f" {outcome.boundary.unit}" if outcome.boundary.unit else ""
     first = outcome.trials[0]
+    judged = tuple(name for name, _, _ in outcome.criteria)
     lines = []
     if outcome.verdict == "flaky":
         lines.append(
@@ -150,17 +155,17 @@ def failure_message(outcome: Outcome) -> str:
         )
     elif outcome.verdict == "passed":  # failed by a --sal-compare-fail check only
         lines.append(f"regressed against the history (the requirement is met): {outcome.requirement}")
-        lines.append(f"  at {outcome.parameter} = {first.value:g}{unit}: {_metrics_text(first.metrics)}")
+        lines.append(f"  at {outcome.parameter} = {first.value:g}{unit}: {_metrics_text(first.metrics, judged)}")
     else:
         lines.append(f"requirement not met: {outcome.requirement}")
-        lines.append(f"  at {outcome.parameter} = {first.value:g}{unit}: {_metrics_text(first.metrics)}; failed: {', '.join(first.failed)}")
+        lines.append(f"  at {outcome.parameter} = {first.value:g}{unit}: {_metrics_text(first.metrics, judged)}; failed: {', '.join(first.failed)}")
     lines.append(
         f"  boundary: {outcome.parameter} {outcome.boundary.text()} ({len(outcome.trials)} trials, {outcome.runs} runs, "
         f"{outcome.termination}); {outcome.confidence()}"
     )
     for label, trial in zip(("pass end", "fail end"), outcome.end_trials()):
         if trial is not None:
-            lines.append(f"  {label} {trial.value:g}{unit}: {_metrics_text(trial.metrics)} ({trial.votes()})")
+            lines.append(f"  {label} {trial.value:g}{unit}: {_metrics_text(trial.metrics, judged)} ({trial.votes()})")
     for text in outcome.contradictions:
         lines.append(f"  not monotonic: {text}")
     if outcome.regression:

@@ -82,6 +82,18 @@ def _check_writable(path: Path, option: str, folder: bool) -> None:
     raise pytest.UsageError(f"pytest-sal: {option} {path}: {problem}; give another {'folder' if folder else 'file'}")
 
 
+def _ini_segments(config: pytest.Config) -> tuple[float, ...]:
+    """ini ``sal_kitti_segments`` as segment lengths (m), or a usage error that names it."""
+    from pytest_sal.kitti_metrics import parse_segments
+    from sal_adapters import SalError
+
+    text = str(config.getini("sal_kitti_segments")).strip()
+    try:
+        return parse_segments(text)
+    except SalError:
+        raise pytest.UsageError(f"pytest-sal: ini option sal_kitti_segments = {text!r}: expected lengths > 0 (m) separated by commas, e.g. 10,20,30,40") from None
+
+
 def _ini_size(text: str) -> int:
     from pytest_sal.cache import parse_size
 
@@ -134,6 +146,8 @@ def add_options(parser: pytest.Parser) -> None:
     parser.addini("sal_seed", "perturbation seed (default 0)", default="0")
     parser.addini("sal_timeout", "seconds per SLAM run before it is killed (default 600)", default="600")
     parser.addini("sal_system", "default system: orbslam3 when installed, else reference_vo", default=None)
+    parser.addini("sal_kitti_segments", "segment lengths (m) of the KITTI metrics t_rel / r_rel, e.g. 10,20,30,40 for a short sequence "
+                  "(default the KITTI devkit's 100,200,...,800)", default="100,200,300,400,500,600,700,800")
 
 
 def outcome_of(report: pytest.TestReport) -> Any:
@@ -179,6 +193,7 @@ class SalSession:
         self.seed = _ini_number(config, "sal_seed")
         self.timeout = _ini_number(config, "sal_timeout")
         self.system_name = ini("sal_system")
+        self.kitti_segments = _ini_segments(config)
         from pytest_sal.robustness import SearchSettings
 
         self.settings = SearchSettings(
@@ -254,6 +269,7 @@ class SalSession:
         return TrialRunner(
             dataset, ref, system, requirement, runs=runs, seed=seed, cache=self.cache, workdir=workdir, timeout=self.timeout,
             artifacts=bool(self.config.option.sal_report_html), cache_frames=bool(self.config.option.sal_cache_frames),
+            kitti_segments=self.kitti_segments,
         )
 
     def search(self, item: pytest.Item, dataset: Any, system: Any, runs: int | None, workdir: Path) -> Any:

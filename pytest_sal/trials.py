@@ -35,6 +35,7 @@ import numpy as np
 
 from pytest_sal.cache import ContentCache
 from pytest_sal.cache_keys import cache_key
+from pytest_sal.kitti_metrics import KITTI_SEGMENTS_M
 from pytest_sal.metrics import evaluate
 from pytest_sal.outcome import Trial
 from pytest_sal.requirements import Requirement
@@ -55,21 +56,24 @@ __all__ = [
 ]
 
 #: Bumped when a change here changes cached results (2: one cache entry per run; 3: entries
-#: carry a checksum, so entries of 2 are left to eviction and ``sal cache clear``).
-RUNNER_VERSION = 3
+#: carry a checksum, so entries of 2 are left to eviction and ``sal cache clear``; 4: records
+#: carry t_rel / r_rel and keys the KITTI segment lengths they were scored with).
+RUNNER_VERSION = 4
 #: Metrics aggregated over runs (median) into a trial's metrics.
-TRIAL_METRICS = ("ate_rmse", "rpe_trans", "rpe_rot", "tracking_rate", "scale_error", "first_tracked", "maps")
+TRIAL_METRICS = ("ate_rmse", "rpe_trans", "rpe_rot", "t_rel", "r_rel", "tracking_rate", "scale_error", "first_tracked", "maps")
 
 
 def aggregate_metrics(runs: list[dict[str, Any]]) -> dict[str, Any]:
     """Median of each metric over the runs. A metric missing (``None``) in more than half of
-    the runs is ``None``: a run that crashed or tracked nothing counts against the trial."""
+    the runs is ``None``: a run that crashed or tracked nothing counts against the trial.
+    ``kitti_missing``: why ``t_rel`` / ``r_rel`` are missing (the first run's reason)."""
     out: dict[str, Any] = {}
     for name in TRIAL_METRICS:
         values = [r.get(name) for r in runs]
         known = [float(v) for v in values if v is not None and math.isfinite(float(v))]
         out[name] = float(np.median(known)) if known and 2 * len(known) > len(values) else None
     out["failures"] = [r["failure"] for r in runs if r.get("failure")]
+    out["kitti_missing"] = next((r["kitti_missing"] for r in runs if r.get("kitti_missing")), None) if out["t_rel"] is None else None
     return out
 
 
@@ -190,6 +194,7 @@ class TrialRunner:
             perturbed once for every system and session (worth it for several systems or an
             external ``command`` system; writing costs about 25-45 ms a frame).
         progress: called with the trial after each evaluation and confirmation.
+        kitti_segments: segment lengths (m) of ``t_rel`` / ``r_rel`` (ini ``sal_kitti_segments``).
     """
 
     dataset: Sequence
@@ -204,6 +209,7 @@ class TrialRunner:
     artifacts: bool = False
     cache_frames: bool = False
     progress: Callable[[Trial], None] | None = None
+    kitti_segments: tuple[float, ...] = KITTI_SEGMENTS_M
 
     def __post_init__(self) -> None:
         self.policy = VotePolicy.for_system(self.system, self.runs)
@@ -217,6 +223,7 @@ class TrialRunner:
             seed=self.seed,
             system=self.system.identity(),
             run=number,
+            kitti_segments_m=self.kitti_segments,
         )
 
     def unchanged_frames(self, value: float) -> list[int] | None:
@@ -302,7 +309,7 @@ class TrialRunner:
                 system=self.system.name, sequence=perturbed.name, sensor=perturbed.sensor, timestamps=perturbed.timestamps,
                 states=states, failure="out of memory (MemoryError)",
             )
-        scored = evaluate(result, groundtruth)
+        scored = evaluate(result, groundtruth, kitti_segments=self.kitti_segments)
         metrics = scored.to_dict()
         for name in TRIAL_METRICS:  # NaN judges like null, and a stored record holds no NaN
             if metrics[name] is not None and not math.isfinite(metrics[name]):

@@ -53,7 +53,7 @@ def systems() -> Iterator[None]:
         SYSTEMS.unregister(name)
 
 
-def write_config(tmp_path: Path) -> Path:
+def write_config(tmp_path: Path, **sections: Any) -> Path:
     config = {
         "experiment": {"name": "exp", "seed": 0},
         "dataset": {"type": "synthetic", "max_frames": FRAMES, "options": {"scene": "indoor", "frames": FRAMES}},
@@ -62,6 +62,7 @@ def write_config(tmp_path: Path) -> Path:
             {"name": "fog_heavy", "type": "fog", "parameters": {"visibility_m": 3}},
         ],
         "output": {"base_dir": str(tmp_path / "out"), "create_timestamp_dir": False},
+        **sections,
     }
     tmp_path.mkdir(parents=True, exist_ok=True)
     path = tmp_path / "exp.yaml"
@@ -69,10 +70,10 @@ def write_config(tmp_path: Path) -> Path:
     return path
 
 
-def evaluate(tmp_path: Path, slam: str = "fake", *extra: str) -> int:
+def evaluate(tmp_path: Path, slam: str = "fake", *extra: str, **sections: Any) -> int:
     calls = tmp_path / "calls.jsonl"
     return main([
-        "evaluate", str(write_config(tmp_path)), "--slam", slam, "--runs", "2",
+        "evaluate", str(write_config(tmp_path, **sections)), "--slam", slam, "--runs", "2",
         "--slam-option", "tracked=min(1, v / 20)", "--slam-option", f"calls_file={calls}", *extra,
     ])
 
@@ -134,6 +135,23 @@ def test_evaluate_writes_the_paper_tree(tmp_path: Path, systems: None, capsys: p
 
     assert "fog_heavy            run 2/2" in out and "tracked 4/8" in out
     assert "ATE median" in out  # the final table
+    # the room's 13 cm path has no segment of the devkit's 100 m: missing, with the reason
+    assert summary["kitti_segments_m"] == [100, 200, 300, 400, 500, 600, 700, 800]
+    assert summary["baseline"]["t_rel"]["count"] == 0 and "too short for a segment of 100 m" in summary["baseline"]["kitti_missing"][0]["reason"]
+    assert "baseline: t_rel / r_rel missing in 2 run(s): the reference path is 0.1 m, too short for a segment of 100 m" in out
+
+
+def test_kitti_segments_of_the_config_score_t_rel_and_r_rel(tmp_path: Path, systems: None, capsys: pytest.CaptureFixture[str]) -> None:
+    assert evaluate(tmp_path, evaluation={"kitti_segments_m": [0.05, 0.02]}) == 0
+    out = capsys.readouterr().out
+    root = tmp_path / "out" / "exp" / "slam_results" / "fake"
+    baseline = read(root / "metrics" / "run_1" / "baseline" / "ate.json")
+    assert baseline["kitti_segments_m"] == [0.02, 0.05] and baseline["kitti_segments"] > 0
+    assert baseline["t_rel"] < 1e-6 and baseline["r_rel"] < 1e-6 and baseline["kitti_missing"] is None  # the fake returns ground truth
+    assert set(read(root / "metrics" / "run_1" / "fog" / "vs_baseline.json")) >= {"t_rel", "r_rel"}
+    summary = read(root / "metrics" / "summary.json")
+    assert summary["kitti_segments_m"] == [0.02, 0.05] and summary["baseline"]["t_rel"]["count"] == 2
+    assert " t_rel % r_rel deg/100m " in out and "t_rel / r_rel: KITTI segments of 0.02, 0.05 m" in out
 
 
 def test_a_failed_or_raising_run_is_recorded_and_the_rest_continues(tmp_path: Path, systems: None) -> None:

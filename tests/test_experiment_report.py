@@ -76,6 +76,7 @@ def test_page_shows_every_part_with_the_numbers_of_the_result_files(experiment: 
         assert f"<h2>{heading}</h2>" in text
     summary = json.loads((experiment / "slam_results" / "reference_vo" / "metrics" / "summary.json").read_text())
     table = re.search(r"<table class='slam'>.*?</table>", text, re.DOTALL).group(0)
+    assert "<th class='num'>KITTI t_rel [%] median</th><th class='num'>KITTI r_rel [deg/100m] median</th>" in table
     for name in SEQUENCES:
         entry = summary["baseline"] if name == "baseline" else summary["perturbations"][name]
         row = re.search(rf"<tr[^>]*><td>{name}</td>(.*?)</tr>", table).group(1)

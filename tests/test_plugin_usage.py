@@ -106,6 +106,8 @@ BAD_INI = [
     ("sal_tolerance", "x", "expected a number > 0 (percent of the boundary value)"),
     ("sal_timeout", "-1", "expected a number > 0 (seconds per SLAM run)"),
     ("sal_cache_size", "lots", "invalid size 'lots': expected bytes with an optional unit*"),
+    ("sal_kitti_segments", "10,x", "expected lengths > 0 (m) separated by commas, e.g. 10,20,30,40"),
+    ("sal_kitti_segments", "0", "expected lengths > 0 (m) separated by commas, e.g. 10,20,30,40"),
 ]
 
 

@@ -122,3 +122,12 @@ def test_an_edge_that_leaves_the_dataset_unchanged_is_refused_before_any_run(tmp
         search_outcome(room, requirement, SearchSettings(), "test_room")
     assert not calls.exists()
     assert room.unchanged_frames(25.0) is None  # 25 m fog does change the room
+
+
+def test_the_kitti_segments_key_the_run_and_score_t_rel(tmp_path: Path) -> None:
+    short = runner(tmp_path, FakeSlam(), kitti_segments=(0.02,))
+    assert short.key(40.0) != runner(tmp_path, FakeSlam()).key(40.0)  # another scoring is another run record
+    trial = short.evaluate(40.0)  # every frame tracked, poses from the ground truth
+    assert trial.metrics["t_rel"] < 1e-6 and trial.metrics["r_rel"] < 1e-6 and trial.metrics["kitti_missing"] is None
+    default = runner(tmp_path, FakeSlam()).evaluate(40.0)
+    assert default.metrics["t_rel"] is None and "too short for a segment of 100 m" in default.metrics["kitti_missing"]
