@@ -65,8 +65,9 @@ def require(
 
 def sweep(param: Any, **levels: float) -> Callable[[F], F]:
     """Run the test once per named severity level: ``@sal.sweep(rain.intensity_mm_h, L=3, M=10)``
-    gives items ``[rain.intensity_mm_h=3]``, ``[rain.intensity_mm_h=10]``; the ``sal_trial``
-    fixture holds that level's trial (metrics, verdict). Put it above ``@sal.require``."""
+    gives items ``[L-rain.intensity_mm_h=3]``, ``[M-rain.intensity_mm_h=10]`` (``-k "[M-"``
+    selects one); the ``sal_trial`` fixture holds that level's trial (metrics, verdict). Put it
+    above ``@sal.require``."""
     ref = _ref(param, "sal.sweep")
     if not levels:
         raise InvalidRequirement(f"sal.sweep({ref.label}) needs named levels, e.g. sal.sweep({ref.label}, L=3, M=10, H=50)")
