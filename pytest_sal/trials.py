@@ -36,7 +36,7 @@ import numpy as np
 from pytest_sal.cache import ContentCache
 from pytest_sal.cache_keys import cache_key
 from pytest_sal.metrics import evaluate
-from pytest_sal.outcome import Trial
+from pytest_sal.outcome import TRIAL_METRICS, Trial
 from pytest_sal.requirements import Requirement
 from sal_adapters import Sequence
 from sal_modules import perturb
@@ -57,8 +57,6 @@ __all__ = [
 #: Bumped when a change here changes cached results (2: one cache entry per run; 3: entries
 #: carry a checksum, so entries of 2 are left to eviction and ``sal cache clear``).
 RUNNER_VERSION = 3
-#: Metrics aggregated over runs (median) into a trial's metrics.
-TRIAL_METRICS = ("ate_rmse", "rpe_trans", "rpe_rot", "tracking_rate", "scale_error", "first_tracked", "maps")
 
 
 def aggregate_metrics(runs: list[dict[str, Any]]) -> dict[str, Any]:

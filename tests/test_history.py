@@ -81,7 +81,7 @@ def test_append_and_list_runs(tmp_path: Path) -> None:
 
 def test_numpy_and_nan_values_are_saved_as_plain_json(tmp_path: Path) -> None:
     outcome = fog(15, 14, ate=float("nan"))
-    outcome.trials[0].metrics["maps"] = np.int64(2)
+    outcome.trials[0].metrics = {**outcome.trials[0].metrics, "maps": np.int64(2)}
     path = save(History(tmp_path), [outcome])
     text = path.read_text()
     assert "NaN" not in text
