@@ -141,11 +141,15 @@ def _check_value(ref: ParamRef, value: Any, where: str) -> None:
 
 
 def _resolve(address: str) -> ParamRef:
+    """``"fog.visibility_m"`` as a ``ParamRef``; a typo in the module or the parameter names the
+    closest one: ``sal.at(): no parameter 'fog.visibilty_m' (fog has no parameter ...; did you mean ...)``."""
     from sal_modules import module_class
 
     module, _, name = address.partition(".")
     try:
-        param = module_class(module).parameters()[name]
-    except Exception as exc:  # noqa: BLE001 - re-raised as a requirement error naming the address
+        cls = module_class(module)
+        if name not in cls.parameters():
+            raise LookupError(cls.unknown_parameter(name))
+    except (SalError, LookupError) as exc:  # re-raised as a requirement error naming the address
         raise InvalidRequirement(f"sal.at(): no parameter {address!r} ({exc})") from None
-    return param.ref()
+    return cls.parameters()[name].ref()

@@ -235,6 +235,7 @@ def test_parse_compare_fail_valid(text: str, expected: object) -> None:
     [
         ("boundary", "'boundary': expected WHAT:LIMIT"),
         ("ate:0.2", "'ate:0.2': unknown quantity 'ate'"),
+        ("tracking_rte:0.1", "'tracking_rte:0.1': unknown quantity 'tracking_rte' (did you mean 'tracking_rate'?)"),
         ("boundary:ten%", "'boundary:ten%': the limit 'ten%' is not a number"),
         ("boundary:", "'boundary:': the limit '' is not a number"),
         ("ate_rmse:-1", "'ate_rmse:-1': the limit must be a finite number >= 0, got '-1'"),
