@@ -61,6 +61,10 @@ def pytest_configure(config: pytest.Config) -> None:
     session = SalSession(config)
     config.stash[SAL_SESSION] = session
     config.pluginmanager.register(session, "sal-session")  # collects outcomes from reports
+    if config.pluginmanager.hasplugin("html") and getattr(config.option, "htmlpath", None):
+        from pytest_sal.html_extras import HtmlExtras  # light: matplotlib loads when a row is made
+
+        config.pluginmanager.register(HtmlExtras(), "sal-html")  # pytest-html rows get boundary, plot, frames
 
 
 def pytest_report_header(config: pytest.Config) -> list[str]:
