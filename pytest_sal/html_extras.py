@@ -41,8 +41,8 @@ def outcome_html(outcome: Any) -> str:
     the boundary's ends (``Trial.artifacts["frame"]``, when the trial made one), as
     ``<img src="data:image/png;base64,...">``."""
     from pytest_sal.plots import png_bytes
-    from pytest_sal.report_html import esc, metric_figure
     from pytest_sal.report import trial_verdict, with_unit
+    from pytest_sal.report_html import esc, metric_figure
 
     parts = [f"<p><b>{esc(outcome.parameter)}</b> boundary {esc(outcome.boundary.text())} ({esc(outcome.termination)}); {esc(outcome.requirement)}</p>"]
     if outcome.trials:
