@@ -65,8 +65,9 @@ def require(
 
 def sweep(param: Any, **levels: float) -> Callable[[F], F]:
     """Run the test once per named severity level: ``@sal.sweep(rain.intensity_mm_h, L=3, M=10)``
-    gives items ``[rain.intensity_mm_h=3]``, ``[rain.intensity_mm_h=10]``; the ``sal_trial``
-    fixture holds that level's trial (metrics, verdict). Put it above ``@sal.require``."""
+    gives items ``[L-rain.intensity_mm_h=3]``, ``[M-rain.intensity_mm_h=10]`` (``-k "[M-"``
+    selects one); the ``sal_trial`` fixture holds that level's trial (metrics, verdict). Put it
+    above ``@sal.require``."""
     ref = _ref(param, "sal.sweep")
     if not levels:
         raise InvalidRequirement(f"sal.sweep({ref.label}) needs named levels, e.g. sal.sweep({ref.label}, L=3, M=10, H=50)")
@@ -140,11 +141,15 @@ def _check_value(ref: ParamRef, value: Any, where: str) -> None:
 
 
 def _resolve(address: str) -> ParamRef:
+    """``"fog.visibility_m"`` as a ``ParamRef``; a typo in the module or the parameter names the
+    closest one: ``sal.at(): no parameter 'fog.visibilty_m' (fog has no parameter ...; did you mean ...)``."""
     from sal_modules import module_class
 
     module, _, name = address.partition(".")
     try:
-        param = module_class(module).parameters()[name]
-    except Exception as exc:  # noqa: BLE001 - re-raised as a requirement error naming the address
+        cls = module_class(module)
+        if name not in cls.parameters():
+            raise LookupError(cls.unknown_parameter(name))
+    except (SalError, LookupError) as exc:  # re-raised as a requirement error naming the address
         raise InvalidRequirement(f"sal.at(): no parameter {address!r} ({exc})") from None
-    return param.ref()
+    return cls.parameters()[name].ref()

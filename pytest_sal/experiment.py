@@ -29,6 +29,7 @@ from pytest_sal.config_yaml import NAME_CHARS, PATH_CHARS, QUOTE_CHARS, ConfigEr
 from sal_adapters import DATASETS, SalError, Sequence, open_dataset
 from sal_adapters.datasets import DatasetKind
 from sal_adapters.plugins import EntryPointRegistry, PluginError
+from sal_adapters.suggest import suggestion
 from sal_modules import (
     PERTURBATIONS,
     Composite,
@@ -279,7 +280,7 @@ class _Parser:
         prefix = f"{where}." if where else ""
         for key in value:
             if key not in known:
-                raise self.error(f"{prefix}{key_text(key)}", f"unknown key; known: {', '.join(known)}")
+                raise self.error(f"{prefix}{key_text(key)}", "unknown key" + suggestion(str(key), known, "known"))
         for key in required:
             if value.get(key) is None:
                 raise self.error(f"{prefix}{key}", "is required")
@@ -369,7 +370,7 @@ class _Parser:
             names = [n for n in registry.names() if n not in hidden]
             if name in names:  # installed, but it cannot be loaded
                 raise self.error(where, one_line(str(exc), 3 * QUOTE_CHARS)) from None
-            raise self.error(where, f"unknown {registry.what} {quote(name, NAME_CHARS)}; known: {', '.join([*known, *names])}") from None
+            raise self.error(where, f"unknown {registry.what} {quote(name, NAME_CHARS)}" + suggestion(name, [*known, *names], "known")) from None
 
     def safe_name(self, value: Any, where: str) -> str:
         self.typed(value, where, "str")
@@ -426,7 +427,7 @@ class _Parser:
         for key in options:
             if key not in allowed or key in ("sequence", "stereo"):
                 rest = [a for a in allowed if a not in ("sequence", "stereo")]
-                raise self.error(f"dataset.options.{key_text(key)}", f"unknown option of dataset kind {quote(kind)}; known: {', '.join(rest) or 'none'}")
+                raise self.error(f"dataset.options.{key_text(key)}", f"unknown option of dataset kind {quote(kind)}" + suggestion(str(key), rest, "known"))
         hints = _option_hints(dataset_kind)
         for key, value in options.items():
             self.option(value, f"dataset.options.{key}", hints.get(key))
@@ -489,7 +490,7 @@ class _Parser:
         specs = cls.parameters()
         for key, value in params.items():
             if key not in specs:
-                raise self.error(f"{where}.parameters.{key_text(key)}", f"{kind} has no such parameter; parameters: {', '.join(specs) or 'none'}")
+                raise self.error(f"{where}.parameters.{key_text(key)}", f"{kind} has no such parameter" + suggestion(str(key), specs, "parameters"))
             spec = specs[key]
             try:
                 spec.validate(value, kind)
@@ -553,7 +554,7 @@ class _Parser:
         target = self.typed(d["target_perturbation"], f"{w}.target_perturbation", "str")
         by_name = {p.name: p for p in perturbations}
         if target not in by_name:
-            raise self.error(f"{w}.target_perturbation", f"{quote(target)} is not a perturbation of this config; perturbations: {', '.join(by_name)}")
+            raise self.error(f"{w}.target_perturbation", f"{quote(target)} is not a perturbation of this config" + suggestion(target, by_name, "perturbations"))
         pert = by_name[target]
         if pert.type == "none":
             raise self.error(f"{w}.target_perturbation", f"{quote(target)} is the clean sequence (type none); it has no parameter to search")
@@ -565,14 +566,14 @@ class _Parser:
                 position, spec = module.param(parameter)
             except ParameterError:
                 addresses = [a for a, (_, p) in module.addresses().items() if p.searchable and "@" not in a and "." in a]
-                raise self.error(f"{w}.parameter", f"composite {quote(target)} has no parameter {quote(parameter)}; searchable: {', '.join(addresses) or 'none'}") from None
+                raise self.error(f"{w}.parameter", f"composite {quote(target)} has no parameter {quote(parameter)}" + suggestion(parameter, addresses, "searchable")) from None
             owner = module.steps[position].name
         else:
             spec = type(module).parameters().get(parameter)  # type: ignore[assignment]
             owner = module.name
         searchable = [a for a, (_, p) in module.addresses().items() if p.searchable and "@" not in a and "." in a] if isinstance(module, Composite) else list(type(module).searchable())
         if spec is None or not spec.searchable:
-            raise self.error(f"{w}.parameter", f"{quote(parameter)} is not a searchable parameter of {quote(target)} ({module.name}); searchable: {', '.join(searchable) or 'none'}")
+            raise self.error(f"{w}.parameter", f"{quote(parameter)} is not a searchable parameter of {quote(target)} ({module.name})" + suggestion(parameter, searchable, "searchable"))
         declared = self.typed(d.get("module", ""), f"{w}.module", "str")
         if declared and declared != owner:
             raise self.error(f"{w}.module", f"{quote(declared)} does not match the module of {quote(parameter)} in {quote(target)}, which is {owner!r}")

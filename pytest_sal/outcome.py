@@ -9,9 +9,55 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import Any, NoReturn
 
-__all__ = ["Boundary", "Outcome", "Trial"]
+from sal_adapters.suggest import suggestion
+
+__all__ = ["TRIAL_METRICS", "Boundary", "Outcome", "Trial", "TrialMetrics"]
+
+#: Metrics aggregated over runs (median) into a trial's metrics.
+TRIAL_METRICS = ("ate_rmse", "rpe_trans", "rpe_rot", "t_rel", "r_rel", "tracking_rate", "scale_error", "first_tracked", "maps")
+
+
+class TrialMetrics(dict[str, Any]):
+    """A trial's metrics, read like ``RunMetrics`` or like the dict they are stored as.
+
+    ``m.ate_rmse == m["ate_rmse"]`` (m), ``m.get(name)``, ``name in m``, ``m.items()``; equal to a
+    dict with the same items and written to JSON as one. A metric of ``TRIAL_METRICS`` a trial
+    lacks (no run tracked, an older history) reads as ``None``; an unknown name is an
+    ``AttributeError`` (``KeyError`` for ``m[name]``) with the closest name or the known ones.
+    Read-only: a trial's metrics are its runs' medians (``TrialMetrics({**m, "maps": 2})`` for
+    a changed copy).
+    """
+
+    __slots__ = ()
+
+    def __missing__(self, name: str) -> Any:
+        if name in TRIAL_METRICS:
+            return None
+        raise KeyError(self._unknown(name))
+
+    def __getattr__(self, name: str) -> Any:
+        if name.startswith("_"):
+            raise AttributeError(name)
+        try:
+            return self[name]
+        except KeyError:
+            raise AttributeError(self._unknown(name)) from None
+
+    def __dir__(self) -> list[str]:
+        return sorted({*super().__dir__(), *TRIAL_METRICS, *(k for k in self if k.isidentifier())})
+
+    def __reduce__(self) -> tuple[type, tuple[dict[str, Any]]]:
+        return TrialMetrics, (dict(self),)
+
+    def _unknown(self, name: str) -> str:
+        return f"trial metrics have no {name!r}" + suggestion(name, [*TRIAL_METRICS, *self], "metrics")
+
+    def _read_only(self, *args: Any, **kwargs: Any) -> NoReturn:
+        raise TypeError("trial metrics are read-only (the medians of the trial's runs); make a changed copy: TrialMetrics({**metrics, name: value})")
+
+    __setitem__ = __delitem__ = clear = pop = popitem = setdefault = update = __ior__ = _read_only  # type: ignore[assignment]
 
 
 @dataclass
@@ -24,7 +70,8 @@ class Trial:
         metrics: aggregated metrics (median over runs): ``ate_rmse``, ``rpe_trans``,
             ``rpe_rot``, ``t_rel``, ``r_rel``, ``tracking_rate``, ``scale_error``,
             ``first_tracked``, ``maps`` (``None`` where not available; ``kitti_missing`` says
-            why ``t_rel`` / ``r_rel`` are).
+            why ``t_rel`` / ``r_rel`` are), as ``TrialMetrics`` (``metrics.ate_rmse`` or
+            ``metrics["ate_rmse"]``; a dict given is wrapped).
         runs: per-run metrics (``RunMetrics.to_dict()``), failure reasons included, with
             ``passed`` (that run met every criterion) and ``cached``.
         cached: every run came from the cache (no SLAM run).
@@ -36,12 +83,17 @@ class Trial:
 
     value: float
     passed: bool
-    metrics: dict[str, Any] = field(default_factory=dict)
+    metrics: TrialMetrics = field(default_factory=TrialMetrics)
     runs: list[dict[str, Any]] = field(default_factory=list)
     cached: bool = False
     wall_time_s: float = 0.0
     failed: list[str] = field(default_factory=list)
     artifacts: dict[str, str] = field(default_factory=dict)
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if name == "metrics" and not isinstance(value, TrialMetrics):
+            value = TrialMetrics(value)
+        super().__setattr__(name, value)
 
     @property
     def passes(self) -> int:
@@ -187,7 +239,10 @@ class Outcome:
         return "; ".join(parts + ([", ".join(ends)] if ends else []))
 
     def to_dict(self) -> dict[str, Any]:
-        return dict(asdict(self), confidence=self.confidence())
+        data = dict(asdict(self), confidence=self.confidence())
+        for trial in data["trials"]:
+            trial["metrics"] = dict(trial["metrics"])  # plain JSON-ready dicts, as stored
+        return data
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Outcome:

@@ -8,6 +8,7 @@ PNG atomically (temporary file, then ``os.replace``) and returns the path; the m
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +21,7 @@ from sal_adapters.errors import SalError
 from sal_adapters.textfiles import atomic_write
 from sal_adapters.trajectory import Trajectory
 
-__all__ = ["PLANES", "ate_figure", "plot_ate_over_time", "plot_trajectories", "save_png", "trajectory_figure"]
+__all__ = ["PLANES", "ate_figure", "plot_ate_over_time", "plot_trajectories", "png_bytes", "save_png", "trajectory_figure"]
 
 #: planes a trajectory can be drawn in (horizontal axis first); ``"auto"`` picks one
 PLANES = ("xy", "xz", "yz", "yx", "zx", "zy")
@@ -102,7 +103,14 @@ def plot_ate_over_time(ate_results: dict[str, AteResult], path: str | Path, *, t
 
 def save_png(fig: Figure, path: str | Path) -> Path:
     """Render ``fig`` to ``path`` as a PNG, atomically (``sal_adapters.textfiles.atomic_write``)."""
-    return atomic_write(path, lambda handle: fig.savefig(handle, format="png", dpi=DPI), binary=True)
+    return atomic_write(path, lambda handle: handle.write(png_bytes(fig)), binary=True)
+
+
+def png_bytes(fig: Figure) -> bytes:
+    """``fig`` rendered as PNG bytes (``DPI`` dots per inch: 800 x 600 px at ``FIGSIZE``)."""
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=DPI)
+    return buffer.getvalue()
 
 
 def _figure() -> tuple[Figure, Axes]:

@@ -30,6 +30,7 @@ __all__ = [
     "pytest_runtest_setup",
     "pytest_sessionfinish",
     "pytest_terminal_summary",
+    "level_id",
     "sal_dataset",
     "sal_level",
     "sal_outcome",
@@ -60,6 +61,10 @@ def pytest_configure(config: pytest.Config) -> None:
     session = SalSession(config)
     config.stash[SAL_SESSION] = session
     config.pluginmanager.register(session, "sal-session")  # collects outcomes from reports
+    if config.pluginmanager.hasplugin("html") and getattr(config.option, "htmlpath", None):
+        from pytest_sal.html_extras import HtmlExtras  # light: matplotlib loads when a row is made
+
+        config.pluginmanager.register(HtmlExtras(), "sal-html")  # pytest-html rows get boundary, plot, frames
 
 
 def pytest_report_header(config: pytest.Config) -> list[str]:
@@ -77,7 +82,7 @@ def pytest_report_header(config: pytest.Config) -> list[str]:
 
 
 def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
-    """``sal.sweep`` / ``sal.at``: one item per level, id ``rain.intensity_mm_h=3``."""
+    """``sal.sweep`` / ``sal.at``: one item per level, id ``L-rain.intensity_mm_h=3`` (see ``level_id``)."""
     levels = getattr(metafunc.function, "sal_levels", None)
     if levels is None:
         return
@@ -85,7 +90,17 @@ def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
     if "sal_trial" not in metafunc.fixturenames:
         raise pytest.UsageError(f"{metafunc.function.__name__}: sal.sweep / sal.at tests take the sal_trial fixture (def {metafunc.function.__name__}(sal_trial): ...)")
     values = [(ref, name, value) for name, value in named.items()]
-    metafunc.parametrize("sal_level", values, ids=[f"{ref.label}={value:g}" for _, _, value in values], indirect=True)
+    metafunc.parametrize("sal_level", values, ids=[level_id(*value) for value in values], indirect=True)
+
+
+def level_id(ref: Any, name: str, value: float) -> str:
+    """The test id of a ``sal.sweep`` level: ``H-rain.intensity_mm_h=50`` (level name, then the
+    parameter, whose name carries its unit, and the value in that unit); a ``sal.at`` point
+    (level ``at``) is ``fog.visibility_m=30``. ``-k`` matches substrings of names, case
+    ignored, so ``-k H`` also matches the ``h`` of ``mm_h``; ``-k "[H-"`` or ``-k H-rain``
+    selects level H (``=`` cannot appear in a ``-k`` word)."""
+    point = f"{ref.label}={value:g}"
+    return point if name == "at" else f"{name}-{point}"
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

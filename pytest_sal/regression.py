@@ -16,6 +16,7 @@ from typing import Any
 
 from pytest_sal.outcome import Outcome, Trial
 from pytest_sal.requirements import METRICS
+from sal_adapters.suggest import closest
 
 __all__ = ["BoundaryCheck", "MetricCheck", "RegressionCheck", "edge_trial", "parse_compare_fail", "regressions", "warm_start"]
 
@@ -176,7 +177,8 @@ def parse_compare_fail(text: str) -> RegressionCheck:
     if not sep:
         raise bad("expected WHAT:LIMIT")
     if what != "boundary" and what not in METRICS:
-        raise bad(f"unknown quantity {what!r}")
+        close = closest(what, ["boundary", *METRICS])  # the valid forms below list them all
+        raise bad(f"unknown quantity {what!r}" + (f" (did you mean {close!r}?)" if close else ""))
     relative = amount.endswith("%")
     number = amount[:-1] if relative else amount
     try:

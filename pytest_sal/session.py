@@ -268,8 +268,8 @@ class SalSession:
         seed = int(requirement.options.get("seed", self.seed))
         return TrialRunner(
             dataset, ref, system, requirement, runs=runs, seed=seed, cache=self.cache, workdir=workdir, timeout=self.timeout,
-            artifacts=bool(self.config.option.sal_report_html), cache_frames=bool(self.config.option.sal_cache_frames),
-            kitti_segments=self.kitti_segments,
+            artifacts=bool(self.config.option.sal_report_html or getattr(self.config.option, "htmlpath", None)),  # ours or pytest-html's
+            cache_frames=bool(self.config.option.sal_cache_frames), kitti_segments=self.kitti_segments,
         )
 
     def search(self, item: pytest.Item, dataset: Any, system: Any, runs: int | None, workdir: Path) -> Any:

@@ -37,7 +37,7 @@ from pytest_sal.cache import ContentCache
 from pytest_sal.cache_keys import cache_key
 from pytest_sal.kitti_metrics import KITTI_SEGMENTS_M
 from pytest_sal.metrics import evaluate
-from pytest_sal.outcome import Trial
+from pytest_sal.outcome import TRIAL_METRICS, Trial
 from pytest_sal.requirements import Requirement
 from sal_adapters import Sequence
 from sal_modules import perturb
@@ -59,8 +59,6 @@ __all__ = [
 #: carry a checksum, so entries of 2 are left to eviction and ``sal cache clear``; 4: records
 #: carry t_rel / r_rel and keys the KITTI segment lengths they were scored with).
 RUNNER_VERSION = 4
-#: Metrics aggregated over runs (median) into a trial's metrics.
-TRIAL_METRICS = ("ate_rmse", "rpe_trans", "rpe_rot", "t_rel", "r_rel", "tracking_rate", "scale_error", "first_tracked", "maps")
 
 
 def aggregate_metrics(runs: list[dict[str, Any]]) -> dict[str, Any]:

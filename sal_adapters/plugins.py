@@ -11,6 +11,7 @@ from importlib.metadata import EntryPoint, entry_points
 from typing import Generic, TypeVar
 
 from sal_adapters.errors import SalError
+from sal_adapters.suggest import suggestion
 
 __all__ = ["PluginError", "EntryPointRegistry"]
 
@@ -58,14 +59,18 @@ class EntryPointRegistry(Generic[T]):
             return self._loaded[name]
         eps = self._entry_points()
         if name not in eps:
-            known = ", ".join(self.names()) or "none installed"
-            raise PluginError(f"unknown {self.what} {name!r}; known: {known} (entry-point group {self.group!r})")
+            raise PluginError(self.unknown(name))
         try:
             obj = eps[name].load()
         except Exception as exc:  # a plug-in's import error must name the plug-in
             raise PluginError(f"{self.what} {name!r} ({eps[name].value}) failed to load: {type(exc).__name__}: {exc}") from exc
         self._loaded[name] = obj
         return obj
+
+    def unknown(self, name: str) -> str:
+        """``unknown perturbation module 'fgo'; did you mean 'fog'? (entry-point group ...)``, or
+        the known names when none is close."""
+        return f"unknown {self.what} {name!r}" + suggestion(name, self.names(), "known") + f" (entry-point group {self.group!r})"
 
     def items(self) -> list[tuple[str, T]]:
         """``(name, object)`` for every entry, loading each."""

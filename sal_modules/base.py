@@ -17,10 +17,9 @@ reuses the same random pattern (common random numbers), which keeps boundary sea
 
 from __future__ import annotations
 
-import difflib
 import json
 import zlib
-from abc import ABC, abstractmethod
+from abc import ABCMeta, abstractmethod
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, ClassVar
@@ -29,6 +28,7 @@ import numpy as np
 
 from sal_adapters.camera import Camera
 from sal_adapters.sequence import Sequence
+from sal_adapters.suggest import suggestion
 from sal_modules.errors import ModuleError, ParameterError
 from sal_modules.params import Param
 
@@ -101,7 +101,17 @@ class ModuleContext:
         return np.random.default_rng(np.random.SeedSequence(words))
 
 
-class Perturbation(ABC):
+class _ModuleClass(ABCMeta):
+    """The type of module classes: ``fog.visibilty_m`` (a typo on the class, where parameters
+    are looked up for bounds) is an ``AttributeError`` naming the closest parameter."""
+
+    def __getattr__(cls, name: str) -> Any:
+        if name.startswith("_"):
+            raise AttributeError(name)
+        raise AttributeError(cls.unknown_parameter(name))
+
+
+class Perturbation(metaclass=_ModuleClass):
     """Base class of every perturbation module.
 
     Subclasses set ``name`` (registry name), ``version`` (bump when the output for the same
@@ -123,7 +133,7 @@ class Perturbation(ABC):
         specs = self.parameters()
         for key in params:
             if key not in specs:
-                raise ParameterError(self._unknown_parameter(key))
+                raise ParameterError(self.unknown_parameter(key))
         values = {key: spec.default for key, spec in specs.items()}
         values.update({key: specs[key].validate(value, self.name) for key, value in params.items()})
         self._params = values
@@ -161,11 +171,15 @@ class Perturbation(ABC):
         }
 
     @classmethod
-    def _unknown_parameter(cls, key: str) -> str:
-        names = list(cls.parameters())
-        close = difflib.get_close_matches(key, names, n=1)
-        hint = f"; did you mean {close[0]!r}?" if close else ""
-        return f"{cls.name} has no parameter {key!r}{hint} (parameters: {', '.join(names) or 'none'})"
+    def unknown_parameter(cls, key: str) -> str:
+        """``fog has no parameter 'visibilty_m'; did you mean 'visibility_m'?`` (else the list)."""
+        return f"{cls.name or cls.__name__} has no parameter {key!r}" + suggestion(key, cls.parameters(), "parameters")
+
+    def __getattr__(self, name: str) -> Any:
+        """``fog().visibilty_m``: the same message as on the class."""
+        if name.startswith("_"):
+            raise AttributeError(name)
+        raise AttributeError(self.unknown_parameter(name))
 
     def check_params(self, params: dict[str, Any]) -> None:
         """Checks between parameters (e.g. ``min <= max``); raise ``ParameterError``."""
@@ -190,7 +204,7 @@ class Perturbation(ABC):
         from sal_modules.refs import ParamRef
 
         if name not in self.parameters():
-            raise self.param_error(f"{self.name} has no parameter {name!r}; parameters: {', '.join(self.parameters())}")
+            raise self.param_error(self.unknown_parameter(name))
         return ParamRef(self, name, self.parameters()[name])
 
     def unchanged_reason(self) -> str | None:

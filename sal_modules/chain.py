@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from sal_adapters.suggest import suggestion
 from sal_modules.base import ModuleContext, Perturbation
 from sal_modules.errors import ParameterError
 from sal_modules.params import Param
@@ -73,8 +74,7 @@ class Composite(Perturbation):
         known = self.addresses()
         if address not in known:
             plain = [a for a in known if "@" not in a]
-            valid = ", ".join(plain or list(known))
-            raise ParameterError(f"composite {self.label()} has no parameter {address!r}; addresses: {valid}")
+            raise ParameterError(f"composite {self.label()} has no parameter {address!r}" + suggestion(address, plain or known, "addresses"))
         return known[address]
 
     def __getattr__(self, name: str) -> ParamRef:

@@ -93,19 +93,22 @@ def test_example_configs_validate() -> None:
 )
 def test_unknown_key_in_each_section(tmp_path: Path, section: str, known: str) -> None:
     config = base_config(tmp_path)
-    config[section]["nmae"] = 1
+    config[section]["zzz"] = 1  # like no key: the list
     message = error_of(tmp_path, config)
-    assert message.startswith(f"{tmp_path / 'exp.yaml'}: {section}.nmae: unknown key; known: {known}")
+    assert message.startswith(f"{tmp_path / 'exp.yaml'}: {section}.zzz: unknown key; known: {known}")
 
 
 def test_unknown_key_at_top_level_and_in_perturbations(tmp_path: Path) -> None:
+    config = base_config(tmp_path)
+    config["experiment"]["descrption"] = "x"
+    assert error_of(tmp_path, config).endswith("experiment.descrption: unknown key; did you mean 'description'?")
     assert ": slam: unknown key; known: experiment, dataset, perturbations, output, robustness_boundary" in error_of(tmp_path, base_config(tmp_path, slam={}))
     config = base_config(tmp_path)
     config["perturbations"][1]["params"] = {}
-    assert "perturbations[1].params: unknown key; known: name, type, enabled, parameters" in error_of(tmp_path, config)
+    assert "perturbations[1].params: unknown key; did you mean 'parameters'?" in error_of(tmp_path, config)
     config = base_config(tmp_path)
     config["perturbations"][2]["parameters"]["modules"][0]["paramters"] = {}
-    assert "perturbations[2].parameters.modules[0].paramters: unknown key; known: name, type, parameters" in error_of(tmp_path, config)
+    assert "perturbations[2].parameters.modules[0].paramters: unknown key; did you mean 'parameters'?" in error_of(tmp_path, config)
 
 
 def test_wrong_types(tmp_path: Path) -> None:
@@ -126,12 +129,15 @@ def test_unknown_module_and_parameter(tmp_path: Path) -> None:
     config = base_config(tmp_path)
     config["perturbations"][1]["type"] = "fgo"
     message = error_of(tmp_path, config)
-    assert "exp.yaml: perturbations[1].type: unknown perturbation module 'fgo'; known: none, composite, " in message
-    assert "fog" in message and "rain" in message
+    assert message.endswith("exp.yaml: perturbations[1].type: unknown perturbation module 'fgo'; did you mean 'fog'?")
+    config["perturbations"][1]["type"] = "xyz"  # nothing close: the list
+    assert "perturbations[1].type: unknown perturbation module 'xyz'; known: none, composite, bandwidth, " in error_of(tmp_path, config)
     config = base_config(tmp_path)
-    config["perturbations"][1]["parameters"] = {"visibility": 50}
+    config["perturbations"][1]["parameters"] = {"visibilty_m": 50}
     message = error_of(tmp_path, config)
-    assert "perturbations[1].parameters.visibility: fog has no such parameter; parameters: visibility_m," in message
+    assert message.endswith("perturbations[1].parameters.visibilty_m: fog has no such parameter; did you mean 'visibility_m'?")
+    config["perturbations"][1]["parameters"] = {"xyz": 50}
+    assert "perturbations[1].parameters.xyz: fog has no such parameter; parameters: visibility_m, " in error_of(tmp_path, config)
 
 
 def test_out_of_range_value_names_the_path_unit_and_range(tmp_path: Path) -> None:
@@ -152,10 +158,12 @@ def test_missing_dataset_path_and_unknown_kind(tmp_path: Path) -> None:
     config = base_config(tmp_path, dataset={"type": "tum"})
     assert "dataset.path: is required for dataset kind 'tum'" in error_of(tmp_path, config)
     config = base_config(tmp_path, dataset={"type": "kitty", "path": "."})
-    assert "dataset.type: unknown dataset kind 'kitty'; known: " in error_of(tmp_path, config)
+    assert "dataset.type: unknown dataset kind 'kitty'; did you mean 'kitti'?" in error_of(tmp_path, config)
     config = base_config(tmp_path)
     config["dataset"]["options"]["scnee"] = "urban"
-    assert "dataset.options.scnee: unknown option of dataset kind 'synthetic'; known: scene, frames, seed, sensor, cache_dir" in error_of(tmp_path, config)
+    assert "dataset.options.scnee: unknown option of dataset kind 'synthetic'; did you mean 'scene'?" in error_of(tmp_path, config)
+    config["dataset"]["options"] = {"xyz": 1}
+    assert "dataset.options.xyz: unknown option of dataset kind 'synthetic'; known: scene, frames, seed, sensor, cache_dir" in error_of(tmp_path, config)
 
 
 def test_dataset_path_is_env_expanded(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -186,14 +194,15 @@ def test_robustness_boundary_checks(tmp_path: Path) -> None:
         config["robustness_boundary"].update(rb)
         return error_of(tmp_path, config)
 
-    assert "robustness_boundary.target_perturbation: 'smog' is not a perturbation of this config; perturbations: rain, fog, combo" in with_rb(target_perturbation="smog")
+    assert "robustness_boundary.target_perturbation: 'foog' is not a perturbation of this config; did you mean 'fog'?" in with_rb(target_perturbation="foog")
+    assert "robustness_boundary.target_perturbation: 'xyz' is not a perturbation of this config; perturbations: rain, fog, combo" in with_rb(target_perturbation="xyz")
     assert "robustness_boundary.parameter: 'heterogeneity' is not a searchable parameter of 'fog' (fog); searchable: visibility_m" in with_rb(parameter="heterogeneity")
     assert "robustness_boundary.lower_bound: 0.5 m is not valid; visibility_m search values must be a number in 1 .. 100000 m" in with_rb(lower_bound=0.5)
     assert "robustness_boundary.upper_bound: 10 must be greater than lower_bound 200" in with_rb(lower_bound=200, upper_bound=10)
     assert "robustness_boundary.tolerance: 0 is not valid" in with_rb(tolerance=0)
     assert "robustness_boundary.max_iters: 0 is not valid; must be an integer >= 1" in with_rb(max_iters=0)
     assert "robustness_boundary.ate_rmse_fail: -1 m is not valid" in with_rb(ate_rmse_fail=-1)
-    assert "robustness_boundary.parameter: composite 'combo' has no parameter 'fog.visibility'; searchable: rain.intensity_mm_h, fog.visibility_m" in with_rb(
+    assert "robustness_boundary.parameter: composite 'combo' has no parameter 'fog.visibility'; did you mean 'fog.visibility_m'?" in with_rb(
         target_perturbation="combo", parameter="fog.visibility"
     )
     config = base_config(tmp_path)

@@ -81,7 +81,7 @@ def test_append_and_list_runs(tmp_path: Path) -> None:
 
 def test_numpy_and_nan_values_are_saved_as_plain_json(tmp_path: Path) -> None:
     outcome = fog(15, 14, ate=float("nan"))
-    outcome.trials[0].metrics["maps"] = np.int64(2)
+    outcome.trials[0].metrics = {**outcome.trials[0].metrics, "maps": np.int64(2)}
     path = save(History(tmp_path), [outcome])
     text = path.read_text()
     assert "NaN" not in text
@@ -235,6 +235,7 @@ def test_parse_compare_fail_valid(text: str, expected: object) -> None:
     [
         ("boundary", "'boundary': expected WHAT:LIMIT"),
         ("ate:0.2", "'ate:0.2': unknown quantity 'ate'"),
+        ("tracking_rte:0.1", "'tracking_rte:0.1': unknown quantity 'tracking_rte' (did you mean 'tracking_rate'?)"),
         ("boundary:ten%", "'boundary:ten%': the limit 'ten%' is not a number"),
         ("boundary:", "'boundary:': the limit '' is not a number"),
         ("ate_rmse:-1", "'ate_rmse:-1': the limit must be a finite number >= 0, got '-1'"),

@@ -28,6 +28,12 @@ def test_modules_lists_parameters_with_units_and_directions(capsys: pytest.Captu
     assert "size" in out and "0 .. 1000 px" in out and "searchable, worse when higher" in out
 
 
+def test_modules_with_a_misspelt_name_suggests_the_closest(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["modules", "fgo"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("sal: error: unknown perturbation module 'fgo'; did you mean 'fog'?") and err.count("\n") == 1
+
+
 def test_preview_writes_original_and_perturbed_side_by_side(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "p.png"
     assert main(["preview", "test_square", "size=50", "value=255", "--dataset", "synthetic", "--dataset-option", "scene=indoor", "--frame", "1", "-o", str(out)]) == 0
@@ -52,6 +58,9 @@ def test_preview_of_a_chain_with_addressed_parameters(tmp_path: Path) -> None:
     ("argv", "message"),
     [
         (["preview", "nosuch", "--dataset", "synthetic"], "unknown perturbation module 'nosuch'"),
+        (["preview", "fgo", "--dataset", "synthetic"], "unknown perturbation module 'fgo'; did you mean 'fog'?"),
+        (["preview", "night>>fgo", "--dataset", "synthetic"], "unknown perturbation module 'fgo'; did you mean 'fog'?"),
+        (["preview", "night>>fog", "fog.visibilty_m=30", "--dataset", "synthetic"], "has no parameter 'fog.visibilty_m'; did you mean 'fog.visibility_m'?"),
         (["preview", "test_square", "size=-1", "--dataset", "synthetic"], "test_square: size = -1 px is not valid; size must be an integer in 0 .. 1000 px"),
         (["preview", "test_square", "sise=3", "--dataset", "synthetic"], "did you mean 'size'?"),
         (["preview", "test_square", "size", "--dataset", "synthetic"], "a module parameter expects KEY=VALUE, got 'size'"),

@@ -266,10 +266,10 @@ def test_sweep_items_per_level_and_the_sal_mark(pytester: pytest.Pytester, mode:
     result = run(pytester, mode, "-m", "sal", "--strict-markers", "-v", "--junitxml=out.xml")
     result.assert_outcomes(passed=4, failed=1, **({} if mode else {"deselected": 1}))  # xdist reports no deselection
     assert "test_plain" not in output(result)
-    has_line(result, "test_levels[fog.visibility_m=100]", "PASSED (fog.visibility_m = 100 m: tracking_rate 1)")
-    has_line(result, "test_levels[fog.visibility_m=30]", "PASSED (fog.visibility_m = 30 m: tracking_rate 0.75)")
+    has_line(result, "test_levels[L-fog.visibility_m=100]", "PASSED (fog.visibility_m = 100 m: tracking_rate 1)")
+    has_line(result, "test_levels[M-fog.visibility_m=30]", "PASSED (fog.visibility_m = 30 m: tracking_rate 0.75)")
     has_line(result, "test_point[fog.visibility_m=30]", "PASSED (fog.visibility_m = 30 m: tracking_rate 0.75)")
-    has_line(result, "test_levels[fog.visibility_m=10]", "FAILED")
+    has_line(result, "test_levels[H-fog.visibility_m=10]", "FAILED")
     has_line(result, "test_search", "PASSED (fog.visibility_m boundary 1-100 m)")
     result.stdout.fnmatch_lines(
         [
@@ -280,10 +280,10 @@ def test_sweep_items_per_level_and_the_sal_mark(pytester: pytest.Pytester, mode:
         ]
     )
     props = junit(pytester.path / "out.xml")
-    assert props["test_levels[fog.visibility_m=10]"]["sal_boundary_fail"] == "10"
-    assert props["test_levels[fog.visibility_m=100]"]["sal_boundary_pass"] == "100"
+    assert props["test_levels[H-fog.visibility_m=10]"]["sal_boundary_fail"] == "10"
+    assert props["test_levels[L-fog.visibility_m=100]"]["sal_boundary_pass"] == "100"
     assert {name: p["sal_trials"] for name, p in props.items()} == {
-        "test_levels[fog.visibility_m=100]": "1", "test_levels[fog.visibility_m=30]": "1", "test_levels[fog.visibility_m=10]": "1",
+        "test_levels[L-fog.visibility_m=100]": "1", "test_levels[M-fog.visibility_m=30]": "1", "test_levels[H-fog.visibility_m=10]": "1",
         "test_point[fog.visibility_m=30]": "1", "test_search": "2",
     }
     # trials at the same value are shared (the point and level M; the search's edge and level L)

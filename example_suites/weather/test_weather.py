@@ -41,7 +41,7 @@ def test_night_fog(sal_outcome):
 @sal.require(ate_rmse < 0.5, tracking_rate >= 0.95)
 def test_rain(sal_trial):
     """Light, moderate, heavy and violent rain (mm/h): one test item per level,
-    ``test_rain[rain.intensity_mm_h=50]``. A level that misses the criteria fails before the
+    ``test_rain[H-rain.intensity_mm_h=50]``. A level that misses the criteria fails before the
     body runs; ``sal_trial.metrics`` holds that level's metrics."""
     # One map from start to end: the system never lost track and restarted.
     assert sal_trial.metrics["maps"] == 1
