@@ -283,7 +283,7 @@ def test_the_yaml_evaluation_section_sets_the_segment_lengths() -> None:
         with pytest.raises(ConfigError) as error:
             parse_config(YAML + f"evaluation: {{kitti_segments_m: {value}}}\n")
         assert str(error.value).startswith(message)
-    with pytest.raises(ConfigError, match="evaluation.segments: unknown key; known: kitti_segments_m"):
+    with pytest.raises(ConfigError, match=r"evaluation.segments: unknown key; did you mean .kitti_segments_m.\?"):
         parse_config(YAML + "evaluation: {segments: [10]}\n")
 
 

@@ -40,7 +40,7 @@ def test_level_names_in_ids_select_with_k(pytester: pytest.Pytester) -> None:
 
 def test_metrics_by_attribute_in_the_body_and_lf_reruns_the_failed_level(pytester: pytest.Pytester) -> None:
     project(pytester, LEVEL_TESTS)
-    folders = ("--sal-cache-dir", str(pytester.path / "cache"), "--sal-history-dir", str(pytester.path / "history"))
+    folders = (f"--sal-cache-dir={pytester.path / 'cache'}", f"--sal-history-dir={pytester.path / 'history'}")
     first = pytester.runpytest("-p", "no:hypothesispytest", *folders, "-v")  # with pytest's cache: --lf reads it
     first.assert_outcomes(passed=3, failed=1)  # H (10 m) tracks 0.25 < 0.5: fails before the body
     has_line(first, "test_levels[M-fog.visibility_m=30]", "PASSED (fog.visibility_m = 30 m: tracking_rate 0.75)")
