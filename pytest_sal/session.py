@@ -233,13 +233,17 @@ class SalSession:
 
     # -- running -------------------------------------------------------------------------------
     def _runner(self, item: pytest.Item, ref: Any, dataset: Any, system: Any, runs: int | None, workdir: Path) -> Any:
+        """The trial runner of ``item``; under ``-v`` it prints each trial as it ends."""
+        from pytest_sal.progress import trial_printer
         from pytest_sal.trials import TrialRunner
 
         requirement = item.function.sal_requirement  # type: ignore[attr-defined]
         seed = int(requirement.options.get("seed", self.seed))
+        metrics = list(dict.fromkeys(c.metric.name for c in requirement.criteria))
         return TrialRunner(
             dataset, ref, system, requirement, runs=runs, seed=seed, cache=self.cache, workdir=workdir, timeout=self.timeout,
             artifacts=bool(self.config.option.sal_report_html), cache_frames=bool(self.config.option.sal_cache_frames),
+            progress=trial_printer(self.config, item.nodeid, ref.label, ref.unit, metrics),
         )
 
     def search(self, item: pytest.Item, dataset: Any, system: Any, runs: int | None, workdir: Path) -> Any:
