@@ -22,7 +22,7 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from pytest_sal.outcome import Boundary, Outcome, Trial
+from pytest_sal.outcome import Boundary, Outcome, Trial, failures_first
 from pytest_sal.requirements import METRICS
 from sal_adapters.textfiles import atomic_write_text
 
@@ -248,14 +248,15 @@ def table_columns(rows: list[dict[str, str]]) -> list[tuple[str, str, str]]:
 
 
 def terminal_table(outcomes: Iterable[Outcome], width: int = 120) -> list[str]:
-    """The summary as lines of at most ``width`` characters (header, rule, one line per test).
+    """The summary as lines of at most ``width`` characters (header, rule, one line per test:
+    failed, flaky and regressed tests first).
 
     Columns fit their contents. When that is too wide, test ids lose their file, then the
     test, parameter, boundary, system and requirement columns give way, the test id most
     (marked ``…``: test ids and parameters lose their left end, the others their right end);
     when even their narrowest is too wide, the system, change, requirement and parameter
     columns are left out, in that order."""
-    rows = summary_rows(outcomes)
+    rows = summary_rows(failures_first(outcomes))
     shown = table_columns(rows)
     natural = {key: max([len(header)] + [len(r[key]) for r in rows]) for key, header, _ in shown}
     if sum(natural.values()) + len(_SEP) * (len(COLUMNS) - 1) > width:  # the tests' names say more than their files
@@ -320,8 +321,8 @@ def _md_table(header: Sequence[str], rows: Iterable[Sequence[str]], align: Seque
 
 def markdown_report(outcomes: Iterable[Outcome], *, title: str = "Robustness") -> str:
     """GitHub-flavoured Markdown: headline counts, the summary table, then a section for each
-    test that failed, was flaky or regressed."""
-    outcomes = list(outcomes)
+    test that failed, was flaky or regressed; those tests come first."""
+    outcomes = failures_first(outcomes)
     lines = [f"## {md(title)}", "", f"**{md(headline(outcomes))}**", ""]
     if outcomes:
         rows = summary_rows(outcomes)

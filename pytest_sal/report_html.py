@@ -23,7 +23,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.transforms import blended_transform_factory
 
-from pytest_sal.outcome import Outcome, Trial
+from pytest_sal.outcome import Outcome, Trial, failures_first
 from pytest_sal.plots import DPI, FIGSIZE, save_png
 from pytest_sal.report import (
     boundary_cell,
@@ -215,9 +215,9 @@ def page_folder(directory: Path) -> Iterator[Path]:
 
 def write_html_report(outcomes: Iterable[Outcome], directory: str | Path, *, title: str = "Robustness report") -> Path:
     """Write ``index.html`` and ``assets/`` into ``directory`` (replacing both together);
-    return the page's path."""
+    return the page's path. Failed, flaky and regressed tests come first."""
     with page_folder(Path(directory)) as folder:
-        _write_page(list(outcomes), folder, title)
+        _write_page(failures_first(outcomes), folder, title)
     return Path(directory) / "index.html"
 
 
