@@ -235,11 +235,12 @@ class SalSession:
     def _runner(self, item: pytest.Item, ref: Any, dataset: Any, system: Any, runs: int | None, workdir: Path) -> Any:
         """The trial runner of ``item``; under ``-v`` it prints each trial as it ends."""
         from pytest_sal.progress import trial_printer
+        from pytest_sal.report import TRIAL_METRICS
         from pytest_sal.trials import TrialRunner
 
         requirement = item.function.sal_requirement  # type: ignore[attr-defined]
         seed = int(requirement.options.get("seed", self.seed))
-        metrics = list(dict.fromkeys(c.metric.name for c in requirement.criteria))
+        metrics = list(dict.fromkeys([*TRIAL_METRICS, *(c.metric.name for c in requirement.criteria)]))  # as the reports show them
         return TrialRunner(
             dataset, ref, system, requirement, runs=runs, seed=seed, cache=self.cache, workdir=workdir, timeout=self.timeout,
             artifacts=bool(self.config.option.sal_report_html), cache_frames=bool(self.config.option.sal_cache_frames),

@@ -51,13 +51,15 @@ def sal_system(request):
 '''
 
 TESTS = '''
+from pytest_sal import rpe_trans
+
 
 @sal.require(tracking_rate >= 0.5, ate_rmse < 1, fog.visibility_m >= 25, tolerance=4)
 def test_live(sal_outcome):
     pass
 
 
-@sal.require(tracking_rate >= 0.8, fog.visibility_m >= 25, max_trials=2)
+@sal.require(tracking_rate >= 0.8, rpe_trans < 5, fog.visibility_m >= 25, max_trials=2)
 def test_live_fail(sal_outcome):
     pass
 '''
@@ -90,13 +92,14 @@ def seen(pytester: pytest.Pytester) -> dict[str, list[int]]:
 
 
 def check_lines(lines: list[str], test: str, trials: list[dict], cached: bool) -> None:
-    """One line per trial, in order: value with unit, verdict, the criteria's metrics, seconds."""
+    """One line per trial, in order: value with unit, verdict, ATE and tracking rate and the
+    criteria's other metrics, seconds."""
     assert [line.split("fog.visibility_m = ", 1)[1].split(":", 1)[0] for line in lines] == [f"{v:g} m" for v, _ in TRIALS[test]]
     for line, (value, verdict), trial in zip(lines, TRIALS[test], trials):
         assert f"test_suite.py::{test}  fog.visibility_m = {value:g} m: {verdict}  " in line, line
         assert trial["passed"] == (verdict == "pass")
         assert f"tracking_rate {trial['metrics']['tracking_rate']:.3g}" in line, line
-        assert ("ate_rmse" in line) == (test == "test_live"), line  # the requirement's metrics only
+        assert "ate_rmse " in line and ("rpe_trans " in line) == (test == "test_live_fail"), line  # and the requirement's others
         assert re.search(r"  \d+\.\d s( \(cached\))?$", line), line
         assert line.endswith(" (cached)") == cached, line
 
