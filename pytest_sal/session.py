@@ -126,6 +126,14 @@ def add_options(parser: pytest.Parser) -> None:
     parser.addini("sal_system", "default system: orbslam3 when installed, else reference_vo", default=None)
 
 
+def _shown(path: Path) -> str:
+    """``path`` for a message: as the user gave it when relative, else relative to the working
+    directory when it lies below it, else whole."""
+    if path.is_absolute() and path.is_relative_to(Path.cwd()):
+        return str(path.relative_to(Path.cwd()))
+    return str(path)
+
+
 def outcome_of(report: pytest.TestReport) -> Any:
     """The ``Outcome`` a report carries, or ``None``."""
     for name, value in report.user_properties:
@@ -179,6 +187,7 @@ class SalSession:
                 raise pytest.UsageError(f"pytest-sal: ini option sal_system = {self.system_name!r}: unknown SLAM system; known: {', '.join(SYSTEMS.names())}")
         self.outcomes: list[Any] = []
         self.unwritten: list[str] = []  # outputs finish() could not write, said in the summary
+        self.written: list[Path] = []  # the files finish() wrote, named in the summary
         self._cache: Any = None
         self._history: Any = None
         if self.compare not in (None, "last") and self.history.runs():
@@ -302,9 +311,12 @@ class SalSession:
             terminal.write_line(line)
         for problem in self.unwritten:
             terminal.write_line(f"pytest-sal: {problem}", red=True)
+        for path in self.written:
+            terminal.write_line(f"pytest-sal: wrote {_shown(path)}")
 
     def finish(self) -> None:
-        """Write the history and the reports (controller only)."""
+        """Write the history and the reports (controller only); ``terminal_summary`` then
+        names each file written (``pytest-sal: wrote report/index.html``)."""
         if not self.outcomes:
             return
         from pytest_sal.history import commit_info, machine_info
@@ -329,6 +341,6 @@ class SalSession:
                 continue
             try:  # a full disk or a read-only folder costs that output, not the tests' results
                 with writing(path):
-                    write()
+                    self.written.append(write())
             except WriteError as exc:
                 self.unwritten.append(f"{what} not written: {exc}")
