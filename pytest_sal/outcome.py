@@ -8,12 +8,13 @@ Values are in the parameter's declared unit (what ``sal modules`` prints: lx, IS
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
 from typing import Any, NoReturn
 
 from sal_adapters.suggest import suggestion
 
-__all__ = ["TRIAL_METRICS", "Boundary", "Outcome", "Trial", "TrialMetrics"]
+__all__ = ["TRIAL_METRICS", "Boundary", "Outcome", "Trial", "TrialMetrics", "failures_first"]
 
 #: Metrics aggregated over runs (median) into a trial's metrics.
 TRIAL_METRICS = ("ate_rmse", "rpe_trans", "rpe_rot", "t_rel", "r_rel", "tracking_rate", "scale_error", "first_tracked", "maps")
@@ -260,6 +261,13 @@ class Outcome:
             trial.metrics = {k: None if isinstance(v, float) and not math.isfinite(v) else v for k, v in trial.metrics.items()}
         data["criteria"] = [(str(m), str(op), float(v)) for m, op, v in data.get("criteria", [])]
         return cls(**data)
+
+
+def failures_first(outcomes: Iterable[Outcome]) -> list[Outcome]:
+    """``outcomes`` with the tests that failed (flaky and regressed ones included: every one
+    not ``passed``) first, then the rest, each group in its given order: what a report lists."""
+    outcomes = list(outcomes)
+    return [o for o in outcomes if not o.passed] + [o for o in outcomes if o.passed]
 
 
 def _check_numbers(data: Any) -> None:

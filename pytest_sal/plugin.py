@@ -292,14 +292,12 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
 
 
 def _trace(outcome: Any) -> str:
-    unit = f" {outcome.boundary.unit}" if outcome.boundary.unit else ""
+    """The report section of a robustness test: requirement, boundary, votes, a line per trial."""
+    from pytest_sal.progress import trial_line
+    from pytest_sal.report import trial_metric_names
+
     lines = [f"{outcome.requirement}; boundary {outcome.boundary.text()} ({outcome.termination})"]
     lines.append(f"  confidence: {outcome.confidence()} ({len(outcome.trials)} trials, {outcome.runs} runs)")
-    for trial in outcome.trials:
-        verdict = "pass" if trial.passed else "FAIL"
-        flags = " (cached)" if trial.cached else ""
-        flags += f" ({trial.votes()})" if len(trial.runs) > 1 else ""
-        metrics = ", ".join(f"{k} {v:.4g}" for k, v in trial.metrics.items() if isinstance(v, float))
-        lines.append(f"  {outcome.parameter} = {trial.value:g}{unit}: {verdict}  {metrics}{flags}")
+    names = trial_metric_names(outcome.criteria)
+    lines += [f"  {trial_line(trial, outcome.parameter, outcome.boundary.unit, names)}" for trial in outcome.trials]
     return "\n".join(lines)
-

@@ -22,7 +22,7 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from pytest_sal.outcome import Boundary, Outcome, Trial
+from pytest_sal.outcome import Boundary, Outcome, Trial, failures_first
 from pytest_sal.requirements import METRICS
 from sal_adapters.textfiles import atomic_write_text
 
@@ -73,7 +73,7 @@ _LEFT_TRUNCATED = ("test", "parameter")
 _SEP = "  "
 ELLIPSIS = "…"
 #: Metrics shown in the trials tables, in order (others go to the details only through criteria).
-TRIAL_METRICS = ("ate_rmse", "tracking_rate")
+SHOWN_METRICS = ("ate_rmse", "tracking_rate")
 _VERDICT_TEXT = {"passed": "passed", "failed": "FAILED", "flaky": "FLAKY", "regressed": "FAILED"}
 
 
@@ -202,11 +202,10 @@ def headline(outcomes: Sequence[Outcome]) -> str:
     return f"{n} {noun}: {', '.join(parts)}"
 
 
-def trial_metric_names(outcome: Outcome) -> list[str]:
-    """Metrics for a trials table: ``TRIAL_METRICS`` and those of the criteria, in that order."""
-    names = list(TRIAL_METRICS)
-    names += [name for name, _, _ in outcome.criteria if name not in names]
-    return names
+def trial_metric_names(criteria: list[tuple[str, str, float]]) -> list[str]:
+    """Metrics for a trial's table row or line: ``SHOWN_METRICS`` and those of the
+    ``criteria`` (``Outcome.criteria``), in that order."""
+    return list(dict.fromkeys([*SHOWN_METRICS, *(name for name, _, _ in criteria)]))
 
 
 def needs_details(outcome: Outcome) -> bool:
@@ -251,14 +250,15 @@ def table_columns(rows: list[dict[str, str]]) -> list[tuple[str, str, str]]:
 
 
 def terminal_table(outcomes: Iterable[Outcome], width: int = 120) -> list[str]:
-    """The summary as lines of at most ``width`` characters (header, rule, one line per test).
+    """The summary as lines of at most ``width`` characters (header, rule, one line per test:
+    failed, flaky and regressed tests first).
 
     Columns fit their contents. When that is too wide, test ids lose their file, then the
     test, parameter, boundary, system and requirement columns give way, the test id most
     (marked ``…``: test ids and parameters lose their left end, the others their right end);
     when even their narrowest is too wide, the system, change, requirement and parameter
     columns are left out, in that order."""
-    rows = summary_rows(outcomes)
+    rows = summary_rows(failures_first(outcomes))
     shown = table_columns(rows)
     natural = {key: max([len(header)] + [len(r[key]) for r in rows]) for key, header, _ in shown}
     if sum(natural.values()) + len(_SEP) * (len(COLUMNS) - 1) > width:  # the tests' names say more than their files
@@ -323,8 +323,8 @@ def _md_table(header: Sequence[str], rows: Iterable[Sequence[str]], align: Seque
 
 def markdown_report(outcomes: Iterable[Outcome], *, title: str = "Robustness") -> str:
     """GitHub-flavoured Markdown: headline counts, the summary table, then a section for each
-    test that failed, was flaky or regressed."""
-    outcomes = list(outcomes)
+    test that failed, was flaky or regressed; those tests come first."""
+    outcomes = failures_first(outcomes)
     lines = [f"## {md(title)}", "", f"**{md(headline(outcomes))}**", ""]
     if outcomes:
         rows = summary_rows(outcomes)
@@ -357,7 +357,7 @@ def _md_details(o: Outcome) -> list[str]:
         if trial is not None:
             lines.append(f"- **{label}** at {md(with_unit(trial.value, unit))}: {md(_metrics_summary(o, trial))}")
     if o.trials:
-        names = trial_metric_names(o)
+        names = trial_metric_names(o.criteria)
         header = ["#", f"value [{unit}]" if unit else "value", "verdict", *names, "cached", "failed criteria"]
         rows = [
             [str(i), num(t.value), trial_verdict(t), *(metric_text(n, t.metrics.get(n)) for n in names), "yes" if t.cached else "", "; ".join(t.failed)]
@@ -379,7 +379,7 @@ def trial_verdict(t: Trial) -> str:
 
 
 def _metrics_summary(o: Outcome, t: Trial) -> str:
-    text = ", ".join(f"{n} {metric_text(n, t.metrics.get(n))}" for n in trial_metric_names(o))
+    text = ", ".join(f"{n} {metric_text(n, t.metrics.get(n))}" for n in trial_metric_names(o.criteria))
     return text + (f" (failed: {'; '.join(t.failed)})" if t.failed else "")
 
 

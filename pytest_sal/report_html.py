@@ -23,7 +23,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.transforms import blended_transform_factory
 
-from pytest_sal.outcome import Outcome, Trial
+from pytest_sal.outcome import Outcome, Trial, failures_first
 from pytest_sal.plots import DPI, FIGSIZE, save_png
 from pytest_sal.report import (
     boundary_cell,
@@ -215,9 +215,9 @@ def page_folder(directory: Path) -> Iterator[Path]:
 
 def write_html_report(outcomes: Iterable[Outcome], directory: str | Path, *, title: str = "Robustness report") -> Path:
     """Write ``index.html`` and ``assets/`` into ``directory`` (replacing both together);
-    return the page's path."""
+    return the page's path. Failed, flaky and regressed tests come first."""
     with page_folder(Path(directory)) as folder:
-        _write_page(list(outcomes), folder, title)
+        _write_page(failures_first(outcomes), folder, title)
     return Path(directory) / "index.html"
 
 
@@ -267,7 +267,7 @@ def _section(o: Outcome, slug: str, directory: Path) -> str:
         facts.append(("regression", f"<span class='bad'>{esc(o.regression)}</span>"))
     for label, trial in zip(("last pass", "first fail"), o.end_trials()):
         if trial is not None:
-            metrics = ", ".join(f"{n} {metric_text(n, trial.metrics.get(n))}" for n in trial_metric_names(o))
+            metrics = ", ".join(f"{n} {metric_text(n, trial.metrics.get(n))}" for n in trial_metric_names(o.criteria))
             facts.append((label, f"{esc(with_unit(trial.value, unit))}: {esc(metrics)}"))
     if o.reproduction:
         facts.append(("reproduce", f"<code>{esc(o.reproduction)}</code>"))
@@ -292,7 +292,7 @@ def _section(o: Outcome, slug: str, directory: Path) -> str:
 
 
 def _trials_table(o: Outcome) -> str:
-    names = trial_metric_names(o)
+    names = trial_metric_names(o.criteria)
     unit = o.boundary.unit
     head = ["#", f"value [{unit}]" if unit else "value", "verdict", *names, "cached", "time", "failed criteria"]
     num_cols = {0, 1, *range(3, 3 + len(names)), 4 + len(names)}  # #, value, metrics, time

@@ -150,6 +150,14 @@ def add_options(parser: pytest.Parser) -> None:
                   "(default the KITTI devkit's 100,200,...,800)", default="100,200,300,400,500,600,700,800")
 
 
+def _shown(path: Path) -> str:
+    """``path`` for a message: as the user gave it when relative, else relative to the working
+    directory when it lies below it, else whole."""
+    if path.is_absolute() and path.is_relative_to(Path.cwd()):
+        return str(path.relative_to(Path.cwd()))
+    return str(path)
+
+
 def outcome_of(report: pytest.TestReport) -> Any:
     """The ``Outcome`` a report carries, or ``None``."""
     for name, value in report.user_properties:
@@ -214,9 +222,10 @@ class SalSession:
                 raise pytest.UsageError(f"pytest-sal: ini option sal_system = {self.system_name!r}: unknown SLAM system; known: {', '.join(SYSTEMS.names())}")
         self.outcomes: list[Any] = []
         self.unwritten: list[str] = []  # outputs finish() could not write, said in the summary
+        self.written: list[Path] = []  # the files finish() wrote, named in the summary
         self._cache: Any = None
         self._history: Any = None
-        self.notes: list[str] = []  # said at the end of the summary (what was written, what was not compared)
+        self.notes: list[str] = []  # said at the end of the summary (a run saved without its name)
         self._datasets: dict[str, Any] = {}
 
     # -- collaborators -------------------------------------------------------------------------
@@ -262,14 +271,19 @@ class SalSession:
 
     # -- running -------------------------------------------------------------------------------
     def _runner(self, item: pytest.Item, ref: Any, dataset: Any, system: Any, runs: int | None, workdir: Path) -> Any:
+        """The trial runner of ``item``; under ``-v`` it prints each trial as it ends."""
+        from pytest_sal.progress import trial_printer
+        from pytest_sal.report import trial_metric_names
         from pytest_sal.trials import TrialRunner
 
         requirement = item.function.sal_requirement  # type: ignore[attr-defined]
         seed = int(requirement.options.get("seed", self.seed))
+        metrics = trial_metric_names([(c.metric.name, c.op, c.threshold) for c in requirement.criteria])  # as the reports show them
         return TrialRunner(
             dataset, ref, system, requirement, runs=runs, seed=seed, cache=self.cache, workdir=workdir, timeout=self.timeout,
             artifacts=bool(self.config.option.sal_report_html or getattr(self.config.option, "htmlpath", None)),  # ours or pytest-html's
             cache_frames=bool(self.config.option.sal_cache_frames), kitti_segments=self.kitti_segments,
+            progress=trial_printer(self.config, item.nodeid, ref.label, ref.unit, metrics),
         )
 
     def search(self, item: pytest.Item, dataset: Any, system: Any, runs: int | None, workdir: Path) -> Any:
@@ -340,6 +354,8 @@ class SalSession:
             terminal.write_line(line)
         for problem in self.unwritten:
             terminal.write_line(f"pytest-sal: {problem}", red=True)
+        for path in self.written:
+            terminal.write_line(f"pytest-sal: wrote {_shown(path)}")
         for note in self.comparison_notes() + self.notes:
             terminal.write_line(f"pytest-sal: {note}", yellow=True)
 
@@ -353,7 +369,8 @@ class SalSession:
         return [f"{len(missing)} of {len(self.outcomes)} tests not compared with {self.compare!r} ({effect}): {missing[0].comparison[len(NOT_COMPARED):]}"]
 
     def finish(self) -> None:
-        """Write the history and the reports (controller only)."""
+        """Write the history and the reports (controller only); ``terminal_summary`` then
+        names each file written (``pytest-sal: wrote report/index.html``)."""
         if not self.outcomes:
             return
         from pytest_sal.history import commit_info, machine_info
@@ -378,7 +395,7 @@ class SalSession:
                 continue
             try:  # a full disk or a read-only folder costs that output, not the tests' results
                 with writing(path):
-                    write()
+                    self.written.append(write())
             except WriteError as exc:
                 self.unwritten.append(f"{what} not written: {exc}")
 

@@ -61,6 +61,7 @@ def test_a_full_disk_at_session_end_costs_only_the_outputs_it_hits(pytester: pyt
     assert lines[1].startswith(f"pytest-sal: --sal-report-html not written: cannot write {html}") and lines[1].endswith(": No space left on device")
     assert ".sal-tmp" not in lines[1]  # the report's file, not its staging copy
     assert markdown.is_file() and "test_fog" in markdown.read_text()  # what could be written was
+    assert [line for line in text.splitlines() if "pytest-sal: wrote" in line] == ["pytest-sal: wrote md/report.md"]
     assert not list(history.glob("*.json")) and not (html / "index.html").exists()
     assert not [p for p in [*history.rglob("*"), *html.rglob("*")] if ".sal-tmp" in p.name or p.suffix == ".tmp"]
 
@@ -68,4 +69,7 @@ def test_a_full_disk_at_session_end_costs_only_the_outputs_it_hits(pytester: pyt
     room = pytester.runpytest_subprocess(*options, timeout=300)
     room.assert_outcomes(passed=1)
     assert "not written" not in output(room)
+    assert sorted(line for line in output(room).splitlines() if "pytest-sal: wrote" in line) == [
+        f"pytest-sal: wrote history/{next(history.glob('*.json')).name}", "pytest-sal: wrote html/index.html", "pytest-sal: wrote md/report.md",
+    ]
     assert len(list(history.glob("*.json"))) == 1 and (html / "index.html").is_file()

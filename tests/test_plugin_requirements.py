@@ -135,6 +135,12 @@ def test_verdicts_boundaries_summary_junit_and_reports(pytester: pytest.Pytester
         image = index.parent / src
         assert image.is_file() and image.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", src
 
+    # 13. the summary ends naming each file written, as given on the command line or from the cwd
+    (history,) = (pytester.path / "history").glob("*.json")
+    result.stdout.fnmatch_lines(
+        ["*pytest-sal robustness boundaries*", f"pytest-sal: wrote history/{history.name}", "pytest-sal: wrote summary.md", "pytest-sal: wrote html/index.html"]
+    )
+
 
 # -- 4: flaky --------------------------------------------------------------------------------
 FLAKY_TESTS = '''

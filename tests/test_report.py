@@ -15,12 +15,13 @@ from pytest_sal.report import (
     headline,
     markdown_report,
     metric_plot,
+    short_id,
     summary_rows,
     terminal_table,
     write_html_report,
     write_markdown,
 )
-from pytest_sal.report_html import metric_figure
+from pytest_sal.report_html import esc, metric_figure
 
 FOG_REQ = "ate_rmse < 1.5 m and tracking_rate >= 0.9 wherever fog.visibility_m >= 25 m"
 XSS_ID = "tests/robustness/test_weather.py::test_rain[<script>alert(1)</script>]"
@@ -197,9 +198,10 @@ def test_terminal_table_fits_and_truncates_ids_from_the_left(outcomes: list[Outc
     full = ["test", "system", "parameter", "requirement", "boundary", "trials", "votes", "margin", "change", "verdict"]
     assert len(header) == len(full) and all(f.startswith(h.rstrip("…")) for h, f in zip(header, full))  # squeezed, not dropped
     assert set(lines[1]) <= {"-", " "} and len(lines) == 2 + 6
-    assert "6 (6 cached)" in lines[2] and "13.67-15.12 m" in lines[2] and ">= 25 m" in lines[2] and "+1.61 m" in lines[2]
-    assert "REGRESSED" in lines[5] and "FLAKY" in lines[4]
-    last = lines[-1]
+    fog_line = lines[-1]  # the one that passed: after the failures
+    assert "6 (6 cached)" in fog_line and "13.67-15.12 m" in fog_line and ">= 25 m" in fog_line and "+1.61 m" in fog_line
+    assert "REGRESSED" in lines[4] and "FLAKY" in lines[3]
+    last = lines[-2]
     assert "…" in last and "night]" in last and "tests/deep" not in last
     # columns line up: the verdict column starts at the same place on every line
     start = lines[0].index("verdict")
@@ -253,10 +255,29 @@ def test_html_report_is_self_contained_and_escaped(outcomes: list[Outcome], tmp_
     assert len(list(out.glob("assets/*/frame-*.png"))) == 6 and len(list(out.glob("assets/*/trajectory-*.png"))) == 1
     assert "15.12 m: pass" in page and "5 m: fail" in page
     # frames mild to severe: 25 m first, 5 m last
-    fog_section = page[page.index("test_fog[orbslam3") :]
+    fog_section = page[page.index("<span class='id'>tests/robustness/test_weather.py::test_fog[orbslam3") :]
     captions = re.findall(r"<figcaption>([^<]+)</figcaption>", fog_section.split("</section>")[0])
     assert captions[:6] == ["25 m: pass", "16.72 m: pass", "15.12 m: pass", "13.67 m: fail", "11.18 m: fail", "5 m: fail"]
     assert write_html_report(outcomes, out) == index  # rewriting over an existing report works
+
+
+def test_failed_flaky_and_regressed_tests_come_first_in_every_report(tmp_path: Path) -> None:
+    calm = fog()
+    calm.test_id = "tests/robustness/test_weather.py::test_calm"
+    given = [fog(), rain(), calm, regressed(), flaky()]
+    first = [XSS_ID, "tests/test_transport.py::test_drop", "tests/test_motion.py::test_blur", fog().test_id, calm.test_id]
+
+    table = terminal_table(given, width=200)[2:]
+    assert [next(i for i, line in enumerate(table) if short_id(test_id) in line) for test_id in first] == [0, 1, 2, 3, 4]
+
+    text = markdown_report(given)
+    rows = [line for line in text.splitlines() if line.startswith("| `")]
+    assert [next(i for i, row in enumerate(rows) if short_id(test_id) in row) for test_id in first] == [0, 1, 2, 3, 4]
+    assert [line.split("`")[1] for line in text.splitlines() if line.startswith("### ")] == first[:3]
+
+    page = write_html_report(given, tmp_path / "report").read_text(encoding="utf-8")
+    assert re.findall(r"<a href='#[^']*' title='([^']*)'>", page) == [esc(test_id) for test_id in first]  # the table
+    assert re.findall(r"<span class='id'>([^<]*)</span>", page) == [esc(test_id) for test_id in first]  # the sections
 
 
 def test_metric_plot_is_a_non_blank_png_with_markers_band_and_edge(tmp_path: Path) -> None:
