@@ -18,7 +18,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pytest
 import yaml
 
 from pytest_sal.history import History
@@ -52,7 +51,6 @@ output.write_text("".join(pose + "\\n" for pose in tracked))
 CONFTEST = '''import sys
 from pathlib import Path
 
-import pytest
 
 import pytest_sal as sal
 import sal_wrappers
