@@ -50,7 +50,7 @@ def add_compare_commands(commands: argparse._SubParsersAction) -> None:
     compare.add_argument("ref", metavar="REF", help="the baseline run")
     compare.add_argument("run_ref", nargs="?", default="last", metavar="RUN", help="the run to check (default: last)")
     compare.add_argument("--fail", dest="checks", action="append", default=[], metavar="CHECK", type=_check,
-                         help="also a regression: " + COMPARE_FAIL_FORMS + ". Repeatable")
+                         help="also a regression: " + COMPARE_FAIL_FORMS.replace("%", "%%") + ". Repeatable")  # argparse expands %
     compare.add_argument("--history-dir", type=Path, default=DEFAULT_ROOT, metavar="DIR", help="the run history (default: %(default)s)")
     compare.set_defaults(run=_run_compare)
 
