@@ -10,6 +10,9 @@ folder holding one plain test file:
 * ``sal --help`` (``python -m pytest_sal.cli --help``);
 * ``python -c "import pytest_sal.plugin"``.
 
+Each run is timed twice: wall clock, and the CPU time (user + system) of the process, which a
+machine busy with other jobs inflates far less.
+
 ``--before DIR`` times a second copy of the packages too (an older checkout, e.g.
 ``git archive dfe0b65 | tar -x -C /tmp/sal-before``), interleaved with this checkout repeat by
 repeat, so a busy machine slows both alike. Each code tree is put first on ``PYTHONPATH``.
@@ -24,6 +27,7 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import resource
 import statistics
 import subprocess
 import sys
@@ -46,21 +50,25 @@ COMMANDS = {
 PLUGIN_COST = ("pytest, 1 plain test", "pytest -p no:sal")
 
 
-def run_once(args: list[str], tree: Path, folder: Path) -> float:
-    """Wall time (s) of ``python ARGS`` in ``folder`` with ``tree`` first on ``PYTHONPATH``."""
+def run_once(args: list[str], tree: Path, folder: Path) -> tuple[float, float]:
+    """Wall and CPU time (s, user + system) of ``python ARGS`` in ``folder`` with ``tree``
+    first on ``PYTHONPATH``."""
     env = {k: v for k, v in os.environ.items() if not k.startswith("PYTEST_")}
     env["PYTHONPATH"] = str(tree)
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
     subprocess.run([sys.executable, *args], cwd=folder, env=env, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    return time.perf_counter() - start
+    wall = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
 
 
-def measure(trees: dict[str, Path], repeats: int) -> dict[tuple[str, str], list[float]]:
-    """Seconds per (tree, command), ``repeats`` each; every repeat runs every command of every
+def measure(trees: dict[str, Path], repeats: int) -> dict[tuple[str, str], list[tuple[float, float]]]:
+    """(wall, CPU) seconds per (tree, command), ``repeats`` each; every repeat runs every command of every
     tree once, trees and commands in reverse order every other repeat, after one untimed
     warm-up run of each (bytecode caches)."""
     pairs = [(name, label) for name in trees for label in COMMANDS]
-    times: dict[tuple[str, str], list[float]] = {pair: [] for pair in pairs}
+    times: dict[tuple[str, str], list[tuple[float, float]]] = {pair: [] for pair in pairs}
     with tempfile.TemporaryDirectory(prefix="sal-startup-") as tmp:
         folder = Path(tmp)
         (folder / "test_plain.py").write_text("def test_plain():\n    assert True\n")
@@ -78,14 +86,15 @@ def summary(values: list[float]) -> str:
     return f"{med:.0f} ({q1:.0f}-{q3:.0f})"
 
 
-def table(trees: dict[str, Path], times: dict[tuple[str, str], list[float]]) -> str:
-    """Markdown: one row per command plus the plugin's paired cost, one column per tree."""
-    lines = ["| ms, median (p25-p75) | " + " | ".join(trees) + " |", "|---|" + "---:|" * len(trees)]
+def table(trees: dict[str, Path], times: dict[tuple[str, str], list[tuple[float, float]]]) -> str:
+    """Markdown: one row per command plus the plugin's paired cost; wall, then CPU, per tree."""
+    columns = [(clock, k, name) for k, clock in enumerate(("wall", "CPU")) for name in trees]
+    lines = ["| ms, median (p25-p75) | " + " | ".join(f"{name} {clock}" for clock, _, name in columns) + " |", "|---|" + "---:|" * len(columns)]
     for label in COMMANDS:
-        lines.append(f"| `{label}` | " + " | ".join(summary(times[(name, label)]) for name in trees) + " |")
+        lines.append(f"| `{label}` | " + " | ".join(summary([t[k] for t in times[(name, label)]]) for _, k, name in columns) + " |")
     with_plugin, without = PLUGIN_COST
-    cost = {name: [a - b for a, b in zip(times[(name, with_plugin)], times[(name, without)])] for name in trees}
-    lines.append("| **plugin cost** (paired: with - without) | " + " | ".join(f"**{summary(cost[name])}**" for name in trees) + " |")
+    cost = [summary([a[k] - b[k] for a, b in zip(times[(name, with_plugin)], times[(name, without)])]) for _, k, name in columns]
+    lines.append("| **plugin cost** (paired: with - without) | " + " | ".join(f"**{c}**" for c in cost) + " |")
     return "\n".join(lines)
 
 
