@@ -6,19 +6,21 @@
 >>> @sal.require(ate_rmse < 1.5, fog.visibility_m >= 25)
 ... def test_fog(sal_outcome):
 ...     assert sal_outcome.boundary.fail_value < 25
+
+pytest imports this package in every session (entry point ``pytest11: sal``), so each name
+loads its module on first use (``sal_adapters.lazy``).
 """
 
-from pytest_sal.api import at, dataset_fixture, require, sweep
-from pytest_sal.requirements import (
-    InvalidRequirement,
-    Metric,
-    ate_rmse,
-    rpe_rot,
-    rpe_trans,
-    scale_error,
-    tracking_rate,
-)
-from sal_adapters.errors import SalError
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from sal_adapters.lazy import lazy_exports
+
+if TYPE_CHECKING:  # what type checkers see; at run time each name loads on first use
+    from pytest_sal.api import at, dataset_fixture, require, sweep
+    from pytest_sal.requirements import InvalidRequirement, Metric, ate_rmse, rpe_rot, rpe_trans, scale_error, tracking_rate
+    from sal_adapters.errors import SalError
 
 __all__ = [
     "InvalidRequirement",
@@ -37,3 +39,9 @@ __all__ = [
 ]
 
 __version__ = "0.1.0"
+
+__getattr__, __dir__ = lazy_exports(__name__, {
+    "pytest_sal.api": ["at", "dataset_fixture", "require", "sweep"],
+    "pytest_sal.requirements": ["InvalidRequirement", "Metric", "ate_rmse", "rpe_rot", "rpe_trans", "scale_error", "tracking_rate"],
+    "sal_adapters.errors": ["SalError"],
+})

@@ -33,16 +33,16 @@ import math
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from pytest_sal.cli_types import add_cache_arguments, add_slam_arguments
 from pytest_sal.experiment import BASELINE
 from sal_adapters.atomic import Replacement
 from sal_adapters.errors import SalError
 from sal_adapters.textfiles import atomic_write
-from sal_adapters.trajectory import Trajectory
+
+if TYPE_CHECKING:  # numpy and scipy load when a command runs, not for `sal --help`
+    from sal_adapters.trajectory import Trajectory
 
 __all__ = ["SUMMARY_METRICS", "add_evaluate_commands", "run_evaluate"]
 
@@ -158,6 +158,8 @@ def run_evaluate(
 # -- running and scoring ---------------------------------------------------------------------------
 def _run_system(system: Any, sequence: Any, workdir: Path, timeout: float | None) -> Any:
     """``system.run``; an exception other than ``SalError`` becomes a failed ``RunResult``."""
+    import numpy as np
+
     from sal_wrappers.base import RunResult, TrackState
 
     start = time.perf_counter()
@@ -181,6 +183,8 @@ def _score(result: Any, groundtruth: Trajectory | None, kitti_segments: tuple[fl
 
 
 def _baseline_trajectory(root: Path, k: int) -> Trajectory | None:
+    from sal_adapters.trajectory import Trajectory
+
     path = root / "trajectories" / f"run_{k}" / f"{BASELINE}.txt"
     return Trajectory.read_tum(path) if path.is_file() else None
 
@@ -205,6 +209,8 @@ def _ate_record(metrics: Any, result: Any, k: int, seconds: float) -> dict[str, 
 def _vs_baseline(p: Any, b: Any, result: Any, *, baseline_traj: Trajectory | None, groundtruth: Trajectory | None) -> dict[str, Any]:
     """Ratios and differences against the baseline of the same run, plus the baseline's ATE on
     the frames this run tracked (the fair comparison when frames were dropped or lost)."""
+    import numpy as np
+
     from pytest_sal.metrics import MIN_POSES, ate
 
     def ratio(x: float | None, y: float | None) -> float | None:
@@ -260,6 +266,8 @@ def _vs_baseline(p: Any, b: Any, result: Any, *, baseline_traj: Trajectory | Non
 
 
 def _summary(all_metrics: dict[str, list[Any]], slam: str, system: Any, config: Any, clean: Any, runs: int) -> dict[str, Any]:
+    import numpy as np
+
     from pytest_sal.kitti_metrics import KITTI_SEGMENTS_M
 
     entries: dict[str, Any] = {}
@@ -340,6 +348,8 @@ def _ate_bar_plot(run_metrics: dict[str, Any], path: Path, k: int) -> Path:
 
 
 def _aggregated_plot(summary: dict[str, Any], path: Path) -> Path:
+    import numpy as np
+
     from pytest_sal.plots import save_png
 
     fig, axes = _figure(2)
@@ -405,6 +415,8 @@ def _table(summary: dict[str, Any]) -> str:
 
 def _clean(value: Any) -> Any:
     """JSON-ready: numpy scalars to Python, non-finite floats to ``None``, paths to text."""
+    import numpy as np
+
     if isinstance(value, dict):
         return {str(k): _clean(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):

@@ -23,20 +23,18 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from pytest_sal.config_yaml import NAME_CHARS, PATH_CHARS, QUOTE_CHARS, ConfigError, key_text, one_line, quote, read_yaml, type_name
-from sal_adapters import DATASETS, SalError, Sequence, open_dataset
-from sal_adapters.datasets import DatasetKind
+from sal_adapters.datasets import DATASETS, DatasetKind, open_dataset
+from sal_adapters.errors import SalError
 from sal_adapters.plugins import EntryPointRegistry, PluginError
 from sal_adapters.suggest import suggestion
-from sal_modules import (
-    PERTURBATIONS,
-    Composite,
-    ParameterError,
-    Perturbation,
-    module_class,
-)
+from sal_modules.errors import ParameterError
+
+if TYPE_CHECKING:  # numpy and the modules load when a config is read, not for `sal --help`
+    from sal_adapters.sequence import Sequence
+    from sal_modules.base import Perturbation
 
 __all__ = [
     "BASELINE",
@@ -485,6 +483,8 @@ class _Parser:
 
     def module(self, kind: str, params: dict[str, Any], where: str, known: tuple[str, ...] = ()) -> Perturbation:
         """The module ``kind`` with ``params`` (``known``: the other types allowed there)."""
+        from sal_modules.registry import PERTURBATIONS, module_class
+
         self.registered(PERTURBATIONS, kind, f"{where}.type", known, hidden=("composite",))
         cls = module_class(kind)
         specs = cls.parameters()
@@ -559,6 +559,8 @@ class _Parser:
         if pert.type == "none":
             raise self.error(f"{w}.target_perturbation", f"{quote(target)} is the clean sequence (type none); it has no parameter to search")
         parameter = self.typed(d["parameter"], f"{w}.parameter", "str")
+        from sal_modules.chain import Composite
+
         module = build_module(pert)
         assert module is not None
         if isinstance(module, Composite):
@@ -630,6 +632,9 @@ def build_sequence(config: ExperimentConfig) -> Sequence:
 
 def build_module(pert: PerturbationConfig) -> Perturbation | None:
     """The module of one perturbation (``None`` for type none)."""
+    from sal_modules.chain import Composite
+    from sal_modules.registry import module_class
+
     if pert.type == "none":
         return None
     if pert.type == "composite":

@@ -6,21 +6,16 @@ import argparse
 import json
 import time
 from pathlib import Path
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from pytest_sal.cli_types import parse_key_values
-from sal_adapters import DATASETS, SalError, open_dataset
-from sal_adapters.images import write_image
-from sal_modules import (
-    PERTURBATIONS,
-    Composite,
-    Perturbation,
-    create,
-    module_class,
-    perturb,
-)
+from sal_adapters.datasets import DATASETS, open_dataset
+from sal_adapters.errors import SalError
+
+if TYPE_CHECKING:  # numpy, OpenCV and the modules load when a command runs, not for `sal --help`
+    import numpy as np
+
+    from sal_modules.base import Perturbation
 
 __all__ = ["add_module_commands", "build_chain", "preview_image"]
 
@@ -74,6 +69,9 @@ def add_module_commands(commands: argparse._SubParsersAction) -> None:
 
 def build_chain(spec: str, params: dict[str, Any]) -> Perturbation:
     """``"fog"`` or ``"night>>fog"`` with ``params`` (chain parameters by address)."""
+    from sal_modules.chain import Composite
+    from sal_modules.registry import create, module_class
+
     names = [name.strip() for name in spec.split(">>")]
     if len(names) == 1:
         return create(names[0], **params)
@@ -84,6 +82,7 @@ def build_chain(spec: str, params: dict[str, Any]) -> Perturbation:
 def preview_image(original: list[np.ndarray], perturbed: list[np.ndarray | None], title: str) -> np.ndarray:
     """Rows of (original, perturbed) per stream under a title bar; a dropped frame is grey."""
     import cv2
+    import numpy as np
 
     rows = []
     for clean, changed in zip(original, perturbed):
@@ -115,6 +114,8 @@ def _wrap(text: str, width_px: int) -> list[str]:
 
 
 def _run_modules(args: argparse.Namespace) -> int:
+    from sal_modules.registry import PERTURBATIONS, module_class
+
     names = [args.name] if args.name else PERTURBATIONS.names()
     described = [module_class(name).describe() for name in names]
     if args.json:
@@ -151,6 +152,9 @@ def _range_text(p: dict[str, Any]) -> str:
 
 
 def _run_preview(args: argparse.Namespace) -> int:
+    from sal_adapters.images import write_image
+    from sal_modules.pipeline import perturb
+
     module = build_chain(args.module, parse_key_values(args.params, "a module parameter"))
     options = parse_key_values(args.dataset_option, "--dataset-option")
     if args.sequence is not None:

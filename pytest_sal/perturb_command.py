@@ -9,7 +9,7 @@ import json
 import time
 from contextlib import nullcontext
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pytest_sal.cli_types import add_cache_arguments
 from pytest_sal.experiment import (
@@ -22,17 +22,22 @@ from pytest_sal.experiment import (
     load_config,
     perturbed_sequences,
 )
-from sal_adapters import Sequence, write_sequence
 from sal_adapters.atomic import Replacement, copy_tree, writing
 from sal_adapters.cache_dir import no_cache_writes
-from sal_adapters.datasets import WRITTEN_MARKER
+from sal_adapters.datasets import WRITTEN_MARKER, write_sequence
 from sal_adapters.textfiles import atomic_write_text
-from sal_modules import Composite, Param, Perturbation
+
+if TYPE_CHECKING:  # numpy and the modules load when a command runs, not for `sal --help`
+    from sal_adapters.sequence import Sequence
+    from sal_modules.base import Perturbation
+    from sal_modules.params import Param
 
 __all__ = ["add_experiment_commands", "run_perturb"]
 
 
 def _describe(module: Perturbation | None) -> str:
+    from sal_modules.chain import Composite
+
     if module is None:
         return "clean sequence"
     steps = module.steps if isinstance(module, Composite) else (module,)
@@ -55,6 +60,8 @@ def _fmt(value: Any) -> str:
 
 
 def _boundary_param(config: ExperimentConfig, rb: BoundaryConfig) -> Param:
+    from sal_modules.chain import Composite
+
     pert = next(p for p in config.perturbations if p.name == rb.target_perturbation)
     module = build_module(pert)
     if isinstance(module, Composite):
@@ -73,6 +80,7 @@ def run_perturb(config: ExperimentConfig, *, dry_run: bool = False, cache_dir: P
 
     from pytest_sal.cache import command_cache
     from pytest_sal.cache_keys import cache_key
+    from sal_modules.chain import Composite
 
     out = out or sys.stdout
     with no_cache_writes() if dry_run else nullcontext():  # a dry run renders in memory only

@@ -4,13 +4,15 @@ over trials, the verdict, the margin and the words a failed test shows."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pytest_sal.outcome import Boundary, Outcome, Trial
 from pytest_sal.requirements import InvalidRequirement, Requirement
 from pytest_sal.search import SearchSpace, boundary_search
-from pytest_sal.trials import TrialRunner
 from sal_modules.refs import ParamRef
+
+if TYPE_CHECKING:  # the plugin reads SearchSettings at configure time, before any trial runs
+    from pytest_sal.trials import TrialRunner
 
 __all__ = ["SearchSettings", "failure_message", "search_outcome", "search_space", "single_outcome"]
 

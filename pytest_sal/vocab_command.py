@@ -8,10 +8,9 @@ import time
 import warnings
 from pathlib import Path
 
-import numpy as np
-
 from pytest_sal.cli_types import positive_int
-from sal_adapters import DATASETS, SalError, open_dataset
+from sal_adapters.datasets import DATASETS, open_dataset
+from sal_adapters.errors import SalError
 
 __all__ = ["add_vocab_commands", "parse_source"]
 
@@ -64,6 +63,8 @@ def parse_source(text: str) -> tuple[str, Path | None]:
 
 
 def _run_build(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from sal_wrappers.vocabulary import (
         build_vocabulary,
         check_tree_shape,

@@ -12,15 +12,15 @@ import json
 from abc import ABC, abstractmethod
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any
-
-from tqdm.auto import tqdm
+from typing import TYPE_CHECKING, Any
 
 from sal_adapters.atomic import replacing_dir, writing
 from sal_adapters.errors import DatasetError
 from sal_adapters.plugins import EntryPointRegistry
-from sal_adapters.sequence import Frame, Sequence
 from sal_adapters.textfiles import atomic_write_text
+
+if TYPE_CHECKING:  # the registry (DATASETS.names() in the sal command's help) needs no numpy
+    from sal_adapters.sequence import Frame, Sequence
 
 __all__ = [
     "DatasetKind",
@@ -144,6 +144,8 @@ def write_sequence(sequence: Sequence, out_dir: str | Path, layout: str | None =
     with writing(out_dir), replacing_dir(out_dir) as staging:
         frames: Iterable[Frame] = iter(sequence)
         if progress:
+            from tqdm.auto import tqdm
+
             frames = tqdm(frames, total=len(sequence), desc=f"writing {sequence.name}", unit="frame")
         reopen = dataset.write(sequence, staging, frames)
         marker = {

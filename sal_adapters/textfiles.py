@@ -6,12 +6,13 @@ import math
 import os
 from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import IO, Any
-
-import numpy as np
+from typing import IO, TYPE_CHECKING, Any
 
 from sal_adapters.atomic import staged_file
 from sal_adapters.errors import DatasetError
+
+if TYPE_CHECKING:  # numpy loads with read_numeric_table: writers such as the sal commands stay light
+    import numpy as np
 
 __all__ = ["read_text", "read_rows", "read_numeric_table", "check_times", "atomic_write", "atomic_write_text", "format_float"]
 
@@ -72,6 +73,8 @@ def read_numeric_table(
         lines.append(number)
     if not values:
         raise DatasetError(f"no {what} found", path)
+    import numpy as np
+
     return np.asarray(values, dtype=np.float64), lines
 
 

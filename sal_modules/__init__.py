@@ -7,25 +7,23 @@
 >>> seq = perturb(clean, chain, seed=1)         # doctest: +SKIP
 
 Module classes are found through the ``sal.perturbations`` entry-point group, so
-``from sal_modules import fog`` works for built-ins and installed plug-ins alike.
+``from sal_modules import fog`` works for built-ins and installed plug-ins alike. Each name
+loads its module on first use (``sal_adapters.lazy``): importing the package pulls no numpy.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from sal_modules.base import STREAMS, ModuleContext, Perturbation, SequencePerturbation
-from sal_modules.chain import Composite
-from sal_modules.errors import DepthUnavailable, ModuleError, ParameterError
-from sal_modules.params import Param, SearchScale
-from sal_modules.pipeline import chain_of, perturb
-from sal_modules.registry import (
-    PERTURBATIONS,
-    create,
-    from_dict,
-    from_json,
-    module_class,
-)
+from sal_adapters.lazy import lazy_exports
+
+if TYPE_CHECKING:  # what type checkers see; at run time each name loads on first use
+    from sal_modules.base import STREAMS, ModuleContext, Perturbation, SequencePerturbation
+    from sal_modules.chain import Composite
+    from sal_modules.errors import DepthUnavailable, ModuleError, ParameterError
+    from sal_modules.params import Param, SearchScale
+    from sal_modules.pipeline import chain_of, perturb
+    from sal_modules.registry import PERTURBATIONS, create, from_dict, from_json, module_class
 
 __all__ = [
     "Composite",
@@ -48,8 +46,20 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
+def _registered(name: str) -> Any:
     """``sal_modules.fog`` and friends: the registered module class of that name."""
-    if name.startswith("_") or name not in PERTURBATIONS.names():
+    from sal_modules.registry import PERTURBATIONS, module_class
+
+    if name not in PERTURBATIONS.names():
         raise AttributeError(f"module 'sal_modules' has no attribute {name!r}")
     return module_class(name)
+
+
+__getattr__, __dir__ = lazy_exports(__name__, {
+    "sal_modules.base": ["STREAMS", "ModuleContext", "Perturbation", "SequencePerturbation"],
+    "sal_modules.chain": ["Composite"],
+    "sal_modules.errors": ["DepthUnavailable", "ModuleError", "ParameterError"],
+    "sal_modules.params": ["Param", "SearchScale"],
+    "sal_modules.pipeline": ["chain_of", "perturb"],
+    "sal_modules.registry": ["PERTURBATIONS", "create", "from_dict", "from_json", "module_class"],
+}, fallback=_registered)

@@ -4,15 +4,21 @@
 >>> system = create("reference_vo")                       # doctest: +SKIP
 >>> result = system.run(sequence, workdir, timeout=120)    # doctest: +SKIP
 >>> result.tracking_rate, result.trajectory                # doctest: +SKIP
+
+The registry and ``create`` are light; the other names load their module on first use
+(``sal_adapters.lazy``), so naming a system does not pull numpy.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+from sal_adapters.lazy import lazy_exports
 from sal_adapters.plugins import EntryPointRegistry
-from sal_wrappers.base import RunResult, SlamSystem, SlamSystemError, TrackState
-from sal_wrappers.load import machine_load, oversubscribed_warning
+
+if TYPE_CHECKING:  # what type checkers see; at run time each name loads on first use
+    from sal_wrappers.base import RunResult, SlamSystem, SlamSystemError, TrackState
+    from sal_wrappers.load import machine_load, oversubscribed_warning
 
 __all__ = ["RunResult", "SYSTEMS", "SlamSystem", "SlamSystemError", "TrackState", "create", "machine_load", "oversubscribed_warning"]
 
@@ -25,3 +31,9 @@ def create(kind: str, /, **options: Any) -> SlamSystem:
     the known ones; a bad option is a ``SlamSystemError`` naming it. ``kind`` is the registry
     name; an option ``name=`` goes to the system (``command`` takes it as its display name)."""
     return SYSTEMS.get(kind)(**options)
+
+
+__getattr__, __dir__ = lazy_exports(__name__, {
+    "sal_wrappers.base": ["RunResult", "SlamSystem", "SlamSystemError", "TrackState"],
+    "sal_wrappers.load": ["machine_load", "oversubscribed_warning"],
+})

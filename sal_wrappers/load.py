@@ -15,6 +15,7 @@ benchmarks/load_kitti07.md): a paced run **fell behind** when more than ``MAX_LA
 after they were due, or when its hand-overs took more than ``MAX_OVERRUN`` (25 %) longer than
 the sensor clock (first to last frame, at the pace). An unpaced run never falls behind.
 
+>>> import numpy as np
 >>> given = np.r_[0.0, np.cumsum(np.full(99, 0.18))]   # 10 Hz frames handed over every 180 ms
 >>> figures = load_figures(np.arange(100) / 10, given, np.full(100, 0.17), 1.0)
 >>> figures["fell_behind"], figures["late_frames"], figures["lateness_ms_max"]
@@ -25,11 +26,13 @@ the sensor clock (first to last frame, at the pace). An unpaced run never falls 
 
 from __future__ import annotations
 
+import math
 import os
 import resource
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
+if TYPE_CHECKING:  # numpy loads with load_figures: the session-start warning stays light
+    import numpy as np
 
 __all__ = [
     "LATE_PERIODS",
@@ -101,8 +104,8 @@ def repace(pace: float, sensor_s: float, loop_s: float, margin: float = REPACE_M
     if loop_s <= 0 or sensor_s <= 0:
         return pace
     factor = margin * pace * sensor_s / loop_s
-    digits = 1 - int(np.floor(np.log10(factor))) if factor > 0 else 2
-    factor = float(np.floor(factor * 10**digits) / 10**digits)
+    digits = 1 - math.floor(math.log10(factor)) if factor > 0 else 2
+    factor = math.floor(factor * 10**digits) / 10**digits
     return float(min(pace, max(MIN_PACE, factor)))
 
 
@@ -147,6 +150,8 @@ def load_figures(
     ``cpu_per_wall`` (cores used on average in the loop); the ``child`` figures; and
     ``fell_behind`` with ``fell_behind_reason`` (``fell_behind_reason()``'s words).
     """
+    import numpy as np
+
     t = np.asarray(timestamps, dtype=np.float64).reshape(-1)
     g = np.asarray(given, dtype=np.float64).reshape(-1)
     track = np.asarray(track_times, dtype=np.float64).reshape(-1)
