@@ -84,7 +84,7 @@ def _check_writable(path: Path, option: str, folder: bool) -> None:
 
 def _ini_segments(config: pytest.Config) -> tuple[float, ...]:
     """ini ``sal_kitti_segments`` as segment lengths (m), or a usage error that names it."""
-    from pytest_sal.kitti_metrics import parse_segments
+    from pytest_sal.kitti_segments import parse_segments
     from sal_adapters import SalError
 
     text = str(config.getini("sal_kitti_segments")).strip()
