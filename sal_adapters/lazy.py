@@ -16,6 +16,8 @@ import sys
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
+from sal_adapters.suggest import suggestion
+
 __all__ = ["lazy_exports"]
 
 
@@ -43,7 +45,7 @@ def lazy_exports(
             return value
         if fallback is not None and not name.startswith("_"):
             return fallback(name)
-        raise AttributeError(f"module {package!r} has no attribute {name!r}")
+        raise AttributeError(f"module {package!r} has no attribute {name!r}" + suggestion(name, home, "names"))
 
     def __dir__() -> list[str]:
         return sorted(set(vars(sys.modules[package])) | set(home))

@@ -48,10 +48,11 @@ __all__ = [
 
 def _registered(name: str) -> Any:
     """``sal_modules.fog`` and friends: the registered module class of that name."""
+    from sal_adapters.suggest import suggestion
     from sal_modules.registry import PERTURBATIONS, module_class
 
     if name not in PERTURBATIONS.names():
-        raise AttributeError(f"module 'sal_modules' has no attribute {name!r}")
+        raise AttributeError(f"module 'sal_modules' has no attribute {name!r}" + suggestion(name, [*PERTURBATIONS.names(), *__all__], "modules and names"))
     return module_class(name)
 
 

@@ -49,6 +49,12 @@ def test_a_misspelt_module_name() -> None:
         module_class("fgo")
     with pytest.raises(PluginError, match=r"unknown perturbation module 'xyz'; known: bandwidth, .*fog.*"):
         create("xyz")
+    import sal_modules
+
+    with pytest.raises(AttributeError, match=r"^module 'sal_modules' has no attribute 'fgo'; did you mean 'fog'\?$"):
+        sal_modules.fgo
+    with pytest.raises(AttributeError, match=r"^module 'pytest_sal' has no attribute 'ate_rmce'; did you mean 'ate_rmse'\?$"):
+        sal.ate_rmce
 
 
 @pytest.mark.parametrize(
