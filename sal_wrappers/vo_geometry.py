@@ -17,6 +17,7 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
+from sal_adapters.compat import popcount, undistort_points_iter
 from sal_adapters.sequence import Sequence
 
 __all__ = [
@@ -118,7 +119,7 @@ def _rectified_camera(
     v, u = np.nonzero(inside[::8, ::8])
     u, v = u * 8, v * 8
     raw = np.stack([maps[0][v, u], maps[1][v, u]], axis=1).astype(np.float64)
-    rays = cv2.undistortPoints(raw[:, None, :], K, dist, criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10))
+    rays = undistort_points_iter(raw[:, None, :], K, dist, (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10))
     H, _ = cv2.findHomography(rays.reshape(-1, 2), np.stack([u, v], axis=1).astype(np.float64), 0)
     _, upper, rotation = cv2.RQDecomp3x3(H)[:3]
     signs = np.diag(np.sign(np.diag(upper)))
@@ -162,7 +163,7 @@ def detect(orb: cv2.ORB, grey: np.ndarray, lens: Lens, stream: int = 0, mask: np
 def _hamming(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamming distances between (broadcast) descriptor arrays (..., 32) of uint8."""
     a, b = np.ascontiguousarray(a).view(np.uint64), np.ascontiguousarray(b).view(np.uint64)
-    return np.bitwise_count(np.bitwise_xor(a, b)).sum(axis=-1, dtype=np.int32)
+    return popcount(np.bitwise_xor(a, b)).sum(axis=-1, dtype=np.int32)
 
 
 def _best(query: np.ndarray, train: np.ndarray, candidates: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

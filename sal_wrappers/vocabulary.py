@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from sal_adapters.cache_dir import user_cache_dir
+from sal_adapters.compat import popcount
 from sal_adapters.errors import DatasetError
 from sal_adapters.file_lock import FileLock
 from sal_adapters.textfiles import atomic_write_text
@@ -89,7 +90,7 @@ def _words(descriptors: np.ndarray) -> np.ndarray:
 
 def _hamming(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Pairwise Hamming distances of ``n x 4`` and ``m x 4`` uint64 rows: ``n x m`` int."""
-    return np.bitwise_count(a[:, None, :] ^ b[None, :, :]).sum(axis=2, dtype=np.int32)
+    return popcount(a[:, None, :] ^ b[None, :, :]).sum(axis=2, dtype=np.int32)
 
 
 @dataclass(eq=False)
@@ -160,7 +161,7 @@ class Vocabulary:
             active = np.flatnonzero(~self.leaf[current])
             while active.size:
                 children = table[current[active]]
-                dist = np.bitwise_count(part[active, None, :] ^ nodes[children]).sum(axis=2, dtype=np.int32)
+                dist = popcount(part[active, None, :] ^ nodes[children]).sum(axis=2, dtype=np.int32)
                 dist[children < 0] = np.iinfo(np.int32).max
                 current[active] = children[np.arange(active.size), dist.argmin(axis=1)]
                 active = active[~self.leaf[current[active]]]

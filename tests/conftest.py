@@ -14,6 +14,27 @@ pytest_plugins = ["pytester"]
 SHARED_DATA = Path(os.environ.get("SAL_TEST_DATA", Path(__file__).resolve().parents[1].parent / "shared" / "data"))
 
 
+#: Test modules marked ``slow`` (``-m "not slow"`` leaves them out: .ci/lowest runs the rest).
+#: Serial times on a busy 2-core machine; the fast rest took about 345 s serially there.
+SLOW_MODULES = {
+    "test_orbslam3.py",  # real ORB-SLAM3 runs on synthetic, KITTI and EuRoC sequences (~110 s)
+    "test_experiment_e2e.py",  # end-to-end experiments: perturb, evaluate, boundary with ORB-SLAM3 (~100 s)
+    "test_experiment_fuzz.py",  # the config fuzz test, hundreds of generated and mutated configs (~45 s)
+}
+#: Single tests marked ``slow`` in otherwise fast modules, as ``module::name``.
+SLOW_TESTS = {
+    "test_plugin_requirements.py::test_orbslam3_through_the_plugin",  # a real ORB-SLAM3 boundary search (~55 s)
+}
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Mark the items of ``SLOW_MODULES`` and the ``SLOW_TESTS`` ``slow``."""
+    for item in items:
+        module = item.path.name
+        if module in SLOW_MODULES or f"{module}::{getattr(item, 'originalname', item.name)}" in SLOW_TESTS:
+            item.add_marker(pytest.mark.slow)
+
+
 @pytest.fixture(scope="session")
 def shared_data() -> Path:
     """Root of the real dataset excerpts; tests that need it skip when it is absent."""

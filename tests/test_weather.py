@@ -26,6 +26,8 @@ from sal_modules.weather.rain import Rain
 from sal_modules.weather.snow import Snow
 
 KOSCHMIEDER = 3.912
+#: numpy >= 2.0 names it trapezoid; 1.26 (the lowest supported) only has trapz
+_trapezoid = getattr(np, "trapezoid", None) or np.trapz
 
 
 @lru_cache(maxsize=None)
@@ -154,7 +156,7 @@ def _reference_optical_depth(fog: Fog, pose: np.ndarray, sequence: Sequence, dep
     distance = depth[vs, us] * lengths
     s = np.linspace(0.0, 1.0, 1500)[None, :] * distance[:, None]
     world = pose[:3, 3] + s[..., None] * ((rays / lengths[:, None]) @ pose[:3, :3].T)[:, None, :]
-    return KOSCHMIEDER / fog.visibility_m * np.trapezoid(fog.density(world), s, axis=1)
+    return KOSCHMIEDER / fog.visibility_m * _trapezoid(fog.density(world), s, axis=1)
 
 
 def test_heterogeneous_fog_patches_are_fixed_in_the_world_frame_to_frame() -> None:
@@ -359,9 +361,9 @@ def test_drops_behind_a_surface_are_hidden() -> None:
     wall[: int(seq.camera.cy)] = 1.5  # a near surface over the streak's upper half
     split = rain.coverage(drop, wall, "left")
     rows = split.sum(axis=1)
-    # hidden rows are 0 up to float32 rounding: OpenCV sums the splats in parallel, and in
-    # another order on a busy machine, which can leave one ulp (1.2e-07 seen); a visible row is > 0.02
-    assert rows[: int(seq.camera.cy) - 3].max() <= 1e-6 and rows[int(seq.camera.cy) + 1 :].max() > 0.02  # (2 px of blur)
+    # hidden rows are 0 but for the far tail of the blur on the row 4 px above the edge
+    # (1.2e-07 with OpenCV 5, 1.0e-06 with OpenCV 4.9's kernel); a visible row is > 0.02
+    assert rows[: int(seq.camera.cy) - 3].max() <= 1e-5 and rows[int(seq.camera.cy) + 1 :].max() > 0.02  # (2 px of blur)
     # the real drop pool: a surface 1 m away hides every drop behind it
     many = ready(Rain(intensity_mm_h=100.0), seq).particles(0)
     near = rain.coverage(many, np.full(shape, 1.0, np.float32), "left")
