@@ -22,6 +22,7 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
+from pytest_sal.gate import NOT_COMPARED
 from pytest_sal.outcome import Boundary, Outcome, Trial, failures_first
 from pytest_sal.requirements import METRICS
 from sal_adapters.textfiles import atomic_write_text
@@ -161,7 +162,7 @@ def boundary_shift(outcome: Outcome) -> float | None:
 def change_cell(outcome: Outcome) -> str:
     """``REGRESSED``, ``no baseline`` (``--sal-compare`` found nothing to compare with), the
     boundary's shift since the baseline, or ``-`` (not compared)."""
-    not_compared = outcome.comparison.startswith("not compared")
+    not_compared = outcome.comparison.startswith(NOT_COMPARED)
     if outcome.regression is not None:
         return "NO BASELINE" if not_compared else "REGRESSED"
     if outcome.previous is None:
