@@ -8,6 +8,14 @@ from pathlib import Path
 
 import pytest
 
+import pytest_sal.testing  # noqa: F401
+import pytest_sal.trials  # noqa: F401
+
+# Loaded here, before any test: pytester's in-process runs (runpytest without a subprocess)
+# unload the modules first imported inside them, and numpy cannot be imported twice in one
+# process. The plugin is light (it loads none of numpy, scipy, OpenCV, evo), so without these
+# imports a test module whose inner sessions run a search in process failed whenever it was
+# the first to run in its process (test_plugin_history.py alone, or first on an xdist worker).
 pytest_plugins = ["pytester"]
 
 #: The real KITTI / EuRoC / TUM excerpts; override with SAL_TEST_DATA.
