@@ -7,7 +7,7 @@ folder holding one plain test file:
 * ``pytest`` on that file, with the plugin and with ``-p no:sal``; the plugin's cost is the
   median of the paired differences (the two runs of a repeat run back to back, so machine load
   hits both alike). Target: under 50 ms;
-* ``sal --help`` (``python -m pytest_sal.cli --help``);
+* ``sal --help`` (``python -m pytest_sal.cli.main --help``);
 * ``python -c "import pytest_sal.plugin"``.
 
 Each run is timed twice: wall clock, and the CPU time (user + system) of the process, which a
@@ -43,7 +43,7 @@ ROOT = Path(__file__).resolve().parents[1]
 COMMANDS = {
     "pytest, 1 plain test": ["-m", "pytest", "test_plain.py"],
     "pytest -p no:sal": ["-m", "pytest", "-p", "no:sal", "test_plain.py"],
-    "sal --help": ["-m", "pytest_sal.cli", "--help"],
+    "sal --help": ["-m", "pytest_sal.cli.main", "--help"],
     "import pytest_sal.plugin": ["-c", "import pytest_sal.plugin"],
 }
 #: The paired difference reported as the plugin's cost: (with, without).

@@ -36,7 +36,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from pytest_sal.metrics import evaluate
+from pytest_sal.analysis.metrics import evaluate
 from sal_adapters import open_dataset
 from sal_modules import create as create_module
 from sal_modules import perturb

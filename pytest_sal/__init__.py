@@ -19,7 +19,7 @@ from sal_adapters.lazy import lazy_exports
 
 if TYPE_CHECKING:  # what type checkers see; at run time each name loads on first use
     from pytest_sal.api import at, dataset_fixture, require, sweep
-    from pytest_sal.requirements import (
+    from pytest_sal.engine.requirements import (
         InvalidRequirement,
         Metric,
         ate_rmse,
@@ -54,6 +54,6 @@ __version__ = "0.1.0"
 
 __getattr__, __dir__ = lazy_exports(__name__, {
     "pytest_sal.api": ["at", "dataset_fixture", "require", "sweep"],
-    "pytest_sal.requirements": ["InvalidRequirement", "Metric", "ate_rmse", "r_rel", "rpe_rot", "rpe_trans", "scale_error", "t_rel", "tracking_rate"],
+    "pytest_sal.engine.requirements": ["InvalidRequirement", "Metric", "ate_rmse", "r_rel", "rpe_rot", "rpe_trans", "scale_error", "t_rel", "tracking_rate"],
     "sal_adapters.errors": ["SalError"],
 })

@@ -21,9 +21,9 @@ from typing import Any, TypeVar
 
 import pytest
 
-from pytest_sal.requirements import InvalidRequirement, Requirement
+from pytest_sal.engine.requirements import InvalidRequirement, Requirement
 from sal_adapters.errors import SalError
-from sal_modules.refs import ParamRef
+from sal_modules.param_refs import ParamRef
 
 __all__ = ["at", "dataset_fixture", "require", "sweep"]
 

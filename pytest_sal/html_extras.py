@@ -40,9 +40,9 @@ def outcome_html(outcome: Any) -> str:
     """``<div class="sal">``: the boundary and requirement, the metric plot and the frames at
     the boundary's ends (``Trial.artifacts["frame"]``, when the trial made one), as
     ``<img src="data:image/png;base64,...">``."""
-    from pytest_sal.plots import png_bytes
-    from pytest_sal.report import trial_verdict, with_unit
-    from pytest_sal.report_html import esc, metric_figure
+    from pytest_sal.analysis.plots import png_bytes
+    from pytest_sal.report.outcome_report import trial_verdict, with_unit
+    from pytest_sal.report.html import esc, metric_figure
 
     parts = [f"<p><b>{esc(outcome.parameter)}</b> boundary {esc(outcome.boundary.text())} ({esc(outcome.termination)}); {esc(outcome.requirement)}</p>"]
     if outcome.trials:

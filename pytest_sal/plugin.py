@@ -105,7 +105,7 @@ def level_id(ref: Any, name: str, value: float) -> str:
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Check every robustness test's marks before anything runs."""
-    from pytest_sal.requirements import InvalidRequirement
+    from pytest_sal.engine.requirements import InvalidRequirement
 
     for item in items:
         function = getattr(item, "function", None)
@@ -233,7 +233,7 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> None:
         pyfuncitem.stash[OUTCOME] = outcome
         pyfuncitem.funcargs[name] = outcome if name == "sal_outcome" else outcome.trials[0]
         if not outcome.passed:
-            from pytest_sal.robustness import failure_message
+            from pytest_sal.engine.requirement_runner import failure_message
 
             __tracebackhide__ = True
             pytest.fail(failure_message(outcome), pytrace=False)
@@ -294,7 +294,7 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
 def _trace(outcome: Any) -> str:
     """The report section of a robustness test: requirement, boundary, votes, a line per trial."""
     from pytest_sal.progress import trial_line
-    from pytest_sal.report import trial_metric_names
+    from pytest_sal.report.outcome_report import trial_metric_names
 
     lines = [f"{outcome.requirement}; boundary {outcome.boundary.text()} ({outcome.termination})"]
     lines.append(f"  confidence: {outcome.confidence()} ({len(outcome.trials)} trials, {outcome.runs} runs)")

@@ -22,8 +22,8 @@ import sys
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from pytest_sal.outcome import Trial
-from pytest_sal.report import metric_text, short_id
+from pytest_sal.engine.outcome import Trial
+from pytest_sal.report.outcome_report import metric_text, short_id
 
 __all__ = ["trial_line", "trial_printer"]
 

@@ -13,7 +13,7 @@ from typing import Any
 
 import pytest
 
-from pytest_sal.gate import MISSING_POLICIES, NOT_COMPARED, space_form_problem
+from pytest_sal.history.gate import MISSING_POLICIES, NOT_COMPARED, space_form_problem
 
 __all__ = ["SAL_SESSION", "SalSession", "add_options", "outcome_of"]
 
@@ -27,7 +27,7 @@ OUTDOOR_MODULES = {"fog", "rain", "snow", "night", "sun_glare", "motion_blur"}
 
 
 def _compare_fail(text: str) -> Any:
-    from pytest_sal.regression import parse_compare_fail
+    from pytest_sal.history.regression import parse_compare_fail
 
     return parse_compare_fail(text)
 
@@ -56,7 +56,7 @@ def _ini_number(config: pytest.Config, name: str) -> Any:
 
 
 def _size(text: str) -> int:
-    from pytest_sal.cache import parse_size
+    from pytest_sal.store.trial_cache import parse_size
 
     try:
         return parse_size(text)
@@ -84,7 +84,7 @@ def _check_writable(path: Path, option: str, folder: bool) -> None:
 
 def _ini_segments(config: pytest.Config) -> tuple[float, ...]:
     """ini ``sal_kitti_segments`` as segment lengths (m), or a usage error that names it."""
-    from pytest_sal.kitti_segments import parse_segments
+    from pytest_sal.analysis.kitti_segments import parse_segments
     from sal_adapters import SalError
 
     text = str(config.getini("sal_kitti_segments")).strip()
@@ -95,7 +95,7 @@ def _ini_segments(config: pytest.Config) -> tuple[float, ...]:
 
 
 def _ini_size(text: str) -> int:
-    from pytest_sal.cache import parse_size
+    from pytest_sal.store.trial_cache import parse_size
 
     try:
         return parse_size(text)
@@ -162,7 +162,7 @@ def outcome_of(report: pytest.TestReport) -> Any:
     """The ``Outcome`` a report carries, or ``None``."""
     for name, value in report.user_properties:
         if name == "sal_outcome":
-            from pytest_sal.outcome import Outcome
+            from pytest_sal.engine.outcome import Outcome
 
             return Outcome.from_dict(json.loads(value))
     return None
@@ -202,7 +202,7 @@ class SalSession:
         self.timeout = _ini_number(config, "sal_timeout")
         self.system_name = ini("sal_system")
         self.kitti_segments = _ini_segments(config)
-        from pytest_sal.robustness import SearchSettings
+        from pytest_sal.engine.requirement_runner import SearchSettings
 
         self.settings = SearchSettings(
             tolerance_pct=_ini_number(config, "sal_tolerance"),
@@ -232,7 +232,7 @@ class SalSession:
     @property
     def cache(self) -> Any:
         if self._cache is None and self.use_cache:
-            from pytest_sal.cache import ContentCache
+            from pytest_sal.store.trial_cache import ContentCache
 
             self._cache = ContentCache(self.cache_dir, self.cache_size)
         return self._cache
@@ -240,7 +240,7 @@ class SalSession:
     @property
     def history(self) -> Any:
         if self._history is None:
-            from pytest_sal.history import History
+            from pytest_sal.history.run_history import History
 
             self._history = History(self.history_dir)
         return self._history
@@ -273,8 +273,8 @@ class SalSession:
     def _runner(self, item: pytest.Item, ref: Any, dataset: Any, system: Any, runs: int | None, workdir: Path) -> Any:
         """The trial runner of ``item``; under ``-v`` it prints each trial as it ends."""
         from pytest_sal.progress import trial_printer
-        from pytest_sal.report import trial_metric_names
-        from pytest_sal.trials import TrialRunner
+        from pytest_sal.report.outcome_report import trial_metric_names
+        from pytest_sal.engine.trial_runner import TrialRunner
 
         requirement = item.function.sal_requirement  # type: ignore[attr-defined]
         seed = int(requirement.options.get("seed", self.seed))
@@ -288,8 +288,8 @@ class SalSession:
 
     def search(self, item: pytest.Item, dataset: Any, system: Any, runs: int | None, workdir: Path) -> Any:
         """Boundary search of ``item``'s requirement; compared with the history when asked."""
-        from pytest_sal.regression import warm_start
-        from pytest_sal.robustness import search_outcome
+        from pytest_sal.history.regression import warm_start
+        from pytest_sal.engine.requirement_runner import search_outcome
 
         requirement = item.function.sal_requirement  # type: ignore[attr-defined]
         runner = self._runner(item, requirement.envelope.ref, dataset, system, runs, workdir)
@@ -300,7 +300,7 @@ class SalSession:
         return self._finished(outcome, system)
 
     def single(self, item: pytest.Item, ref: Any, value: float, dataset: Any, system: Any, runs: int | None, workdir: Path) -> Any:
-        from pytest_sal.robustness import single_outcome
+        from pytest_sal.engine.requirement_runner import single_outcome
 
         runner = self._runner(item, ref, dataset, system, runs, workdir)
         outcome = single_outcome(runner, item.function.sal_requirement, item.nodeid, value)  # type: ignore[attr-defined]
@@ -322,7 +322,7 @@ class SalSession:
     def machine(self) -> str:
         """This machine in words (``history.machine_text``), read once."""
         if self._machine is None:
-            from pytest_sal.history import machine_info, machine_text
+            from pytest_sal.history.run_history import machine_info, machine_text
 
             self._machine = machine_text(machine_info())
         return self._machine
@@ -333,7 +333,7 @@ class SalSession:
         outcome.system_version = system.version_text()
         if self.compare is None:
             return outcome
-        from pytest_sal.gate import compare_with_baseline
+        from pytest_sal.history.gate import compare_with_baseline
 
         return compare_with_baseline(outcome, self.history, self.compare, self.checks, missing=self.compare_missing)
 
@@ -347,7 +347,7 @@ class SalSession:
     def terminal_summary(self, terminal: Any) -> None:
         if not self.outcomes:
             return
-        from pytest_sal.report import terminal_table
+        from pytest_sal.report.outcome_report import terminal_table
 
         terminal.section("pytest-sal robustness boundaries")
         for line in terminal_table(self.outcomes, width=max(self.config.get_terminal_writer().fullwidth, 120)):
@@ -373,13 +373,13 @@ class SalSession:
         names each file written (``pytest-sal: wrote report/index.html``)."""
         if not self.outcomes:
             return
-        from pytest_sal.history import commit_info, machine_info
+        from pytest_sal.history.run_history import commit_info, machine_info
 
         commit, dirty = commit_info(self.config.rootpath)
         machine = dict(machine_info(), load_avg_start=self.load_at_start)
         for outcome in self.outcomes:
             outcome.commit = commit + ("+dirty" if dirty else "")
-        from pytest_sal.report import write_html_report, write_markdown
+        from pytest_sal.report.outcome_report import write_html_report, write_markdown
         from sal_adapters.atomic import writing
         from sal_adapters.errors import WriteError
 

@@ -34,7 +34,7 @@ from sal_modules.params import Param
 
 if TYPE_CHECKING:
     from sal_modules.chain import Composite
-    from sal_modules.refs import ParamRef
+    from sal_modules.param_refs import ParamRef
 
 __all__ = ["STREAMS", "DepthLookup", "ModuleContext", "Perturbation", "SequencePerturbation"]
 
@@ -201,7 +201,7 @@ class Perturbation(metaclass=_ModuleClass):
         """Parameter ``name`` of this configured module, for a bound that keeps its other
         settings: ``motion_blur(exposure_ms=100).ref("speed_kmh") >= 30`` (on an instance,
         ``.speed_kmh`` is the value itself)."""
-        from sal_modules.refs import ParamRef
+        from sal_modules.param_refs import ParamRef
 
         if name not in self.parameters():
             raise self.param_error(self.unknown_parameter(name))

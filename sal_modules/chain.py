@@ -23,7 +23,7 @@ from sal_adapters.suggest import suggestion
 from sal_modules.base import ModuleContext, Perturbation
 from sal_modules.errors import ParameterError
 from sal_modules.params import Param
-from sal_modules.refs import ParamRef
+from sal_modules.param_refs import ParamRef
 
 __all__ = ["Composite"]
 

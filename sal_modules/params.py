@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any, Literal
 from sal_modules.errors import ParameterError
 
 if TYPE_CHECKING:
-    from sal_modules.refs import Bound, ParamRef
+    from sal_modules.param_refs import Bound, ParamRef
 
 __all__ = ["Domain", "Worse", "SearchScale", "Param"]
 
@@ -139,7 +139,7 @@ class Param:
     # -- bounds: ``fog.visibility_m >= 25`` (the requirement language reads them) -------------
     def ref(self) -> ParamRef:
         """This parameter of its module class as a ``ParamRef``."""
-        from sal_modules.refs import ParamRef
+        from sal_modules.param_refs import ParamRef
 
         return ParamRef(self.owner, self.name, self)
 

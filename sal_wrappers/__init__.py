@@ -18,7 +18,7 @@ from sal_adapters.plugins import EntryPointRegistry
 
 if TYPE_CHECKING:  # what type checkers see; at run time each name loads on first use
     from sal_wrappers.base import RunResult, SlamSystem, SlamSystemError, TrackState
-    from sal_wrappers.load import machine_load, oversubscribed_warning
+    from sal_wrappers.pacing import machine_load, oversubscribed_warning
 
 __all__ = ["RunResult", "SYSTEMS", "SlamSystem", "SlamSystemError", "TrackState", "create", "machine_load", "oversubscribed_warning"]
 
@@ -35,5 +35,5 @@ def create(kind: str, /, **options: Any) -> SlamSystem:
 
 __getattr__, __dir__ = lazy_exports(__name__, {
     "sal_wrappers.base": ["RunResult", "SlamSystem", "SlamSystemError", "TrackState"],
-    "sal_wrappers.load": ["machine_load", "oversubscribed_warning"],
+    "sal_wrappers.pacing": ["machine_load", "oversubscribed_warning"],
 })

@@ -76,7 +76,7 @@ class RunResult:
             ``info["attempts"]``: every attempt of a run that was re-run because it fell behind
             the sensor clock (``pace``, ``tracked``, ``frames``, ``wall_time_s``, ``failure``,
             ``fell_behind``, ``load``), the last one being this result.
-        load: whether the run kept up with the sensor clock (``sal_wrappers.load.load_figures``:
+        load: whether the run kept up with the sensor clock (``sal_wrappers.pacing.load_figures``:
             hand-over lateness, tracking time against the frame period, CPU time, load average);
             empty when not measured.
         fell_behind: the run (its last attempt) still fell behind the sensor clock: the machine

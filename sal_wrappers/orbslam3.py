@@ -4,7 +4,7 @@
 >>> result = system.run(sequence, workdir, timeout=120)               # doctest: +SKIP
 
 ORB-SLAM3 calls ``exit(-1)`` on a bad settings file and segfaults on a bad vocabulary or when
-saving an empty map, so every run happens in a child process (``sal_wrappers.child``); its
+saving an empty map, so every run happens in a child process (``sal_wrappers.child_process``); its
 C++ output goes to ``workdir/orbslam3.log``. The parent writes the settings file from the
 sequence's camera (``sal_wrappers.orbslam3_settings``), streams grey frames to the child and
 turns what the child recorded into a ``RunResult``.
@@ -38,7 +38,7 @@ timeout still leaves the per-frame states and poses; ``failure`` then says what 
 not a timeout) also sets ``info["written_before_failure"]``: every frame's result is there, so
 the run is scored like a clean one and keeps its ``failure``.
 
-Machine load (``sal_wrappers.load``): the child records when each frame was handed over, its
+Machine load (``sal_wrappers.pacing``): the child records when each frame was handed over, its
 CPU time and the load average, and ``RunResult.load`` says whether the run kept up with the
 sensor clock. A paced run that fell behind and ran to the end is run again, slower in
 proportion (``repace``: the rate the machine achieved), up to ``load_retries`` times; the last
@@ -63,8 +63,8 @@ import numpy as np
 
 from sal_adapters import Sequence, Trajectory
 from sal_wrappers.base import WRITTEN_BEFORE_FAILURE, RunResult, SlamSystem, SlamSystemError, TrackState
-from sal_wrappers.child import ChildOutcome, run_child, write_result
-from sal_wrappers.load import load_figures, process_usage, repace
+from sal_wrappers.child_process import ChildOutcome, run_child, write_result
+from sal_wrappers.pacing import load_figures, process_usage, repace
 from sal_wrappers.orbslam3_settings import OrbParameters, write_settings
 from sal_wrappers.prefetch import prefetched
 

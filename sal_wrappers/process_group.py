@@ -1,7 +1,7 @@
 """Running an external program in its own process group, with a log and a timeout, so that
 nothing it starts outlives the run, nor the process that started it.
 
-``RunGuard`` is shared with ``sal_wrappers.child``: it marks a run's environment, starts the
+``RunGuard`` is shared with ``sal_wrappers.child_process``: it marks a run's environment, starts the
 run's watchdog (``sal_wrappers.watchdog``: it kills the run when the parent dies without
 cleaning up) and, at the end of the run, kills every marked process that is left.
 """

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 import pytest_sal.testing  # noqa: F401
-import pytest_sal.trials  # noqa: F401
+import pytest_sal.engine.trial_runner  # noqa: F401
 
 # Loaded here, before any test: pytester's in-process runs (runpytest without a subprocess)
 # unload the modules first imported inside them, and numpy cannot be imported twice in one
@@ -56,14 +56,14 @@ def isolated_sal_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """Every test session renders and caches into its own folders, never the user's cache nor
     the checkout: ``sal`` commands run without ``--cache-dir`` use ``./.sal/cache``, which is
     redirected here (the plugin's ``<rootdir>/.sal/cache`` is left as it is)."""
-    import pytest_sal.cache
+    import pytest_sal.store.trial_cache
 
     root = tmp_path_factory.mktemp("sal-cache")
     commands_cache = tmp_path_factory.mktemp("commands-trial-cache")
-    default = pytest_sal.cache.default_cache_dir
+    default = pytest_sal.store.trial_cache.default_cache_dir
     with pytest.MonkeyPatch.context() as patch:
         patch.setenv("SAL_CACHE_DIR", str(root))
-        patch.setattr(pytest_sal.cache, "default_cache_dir", lambda rootdir=None: commands_cache if rootdir is None else default(rootdir))
+        patch.setattr(pytest_sal.store.trial_cache, "default_cache_dir", lambda rootdir=None: commands_cache if rootdir is None else default(rootdir))
         yield root
 
 

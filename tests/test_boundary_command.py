@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from pytest_sal.boundary_command import linear_sweep_trials
-from pytest_sal.cli import main
+from pytest_sal.cli.boundary import linear_sweep_trials
+from pytest_sal.cli.main import main
 from pytest_sal.testing import FakeSlam
 from sal_wrappers import SYSTEMS
 

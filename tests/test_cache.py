@@ -19,15 +19,15 @@ import cv2
 import numpy as np
 import pytest
 
-from pytest_sal.cache import (
+from pytest_sal.store.trial_cache import (
     CacheError,
     CacheWarning,
     ContentCache,
     default_cache_dir,
     parse_size,
 )
-from pytest_sal.cache_keys import cache_key
-from pytest_sal.cli import main
+from pytest_sal.store.cache_keys import cache_key
+from pytest_sal.cli.main import main
 from sal_adapters import SalError, open_dataset, write_sequence
 
 REPO = Path(__file__).resolve().parents[1]
@@ -57,7 +57,7 @@ def test_key_is_sha256_of_documented_canonical_json() -> None:
 
 
 def test_key_is_stable_across_processes() -> None:
-    code = "import json,sys; from pytest_sal.cache_keys import cache_key; print(cache_key(**json.loads(sys.argv[1])))"
+    code = "import json,sys; from pytest_sal.store.cache_keys import cache_key; print(cache_key(**json.loads(sys.argv[1])))"
     out = subprocess.run([sys.executable, "-c", code, json.dumps(BASE)], capture_output=True, text=True, check=True, cwd=REPO,
                          env={**os.environ, "PYTHONHASHSEED": "123"})
     assert out.stdout.strip() == cache_key(**BASE)
@@ -266,7 +266,7 @@ CHILD = textwrap.dedent(
     """
     import os, sys, time
     from pathlib import Path
-    from pytest_sal.cache import ContentCache
+    from pytest_sal.store.trial_cache import ContentCache
     root, key, mode, signal_file = sys.argv[1:5]
     cache = ContentCache(root)
 

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import yaml
 
-from pytest_sal.history import History
+from pytest_sal.history.run_history import History
 
 CI = Path(__file__).resolve().parents[1] / "example_suites" / "ci"
 GATE = CI / "sal-gate.sh"

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from pytest_sal.cli import main
+from pytest_sal.cli.main import main
 
 SAL = Path(sys.executable).with_name("sal")
 

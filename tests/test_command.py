@@ -488,9 +488,9 @@ def drift_script(path: Path, drift: float) -> Path:
 
 def trial_runner(tmp_path: Path, system):
     from pytest_sal import ate_rmse
-    from pytest_sal.cache import ContentCache
-    from pytest_sal.requirements import Requirement
-    from pytest_sal.trials import TrialRunner
+    from pytest_sal.store.trial_cache import ContentCache
+    from pytest_sal.engine.requirements import Requirement
+    from pytest_sal.engine.trial_runner import TrialRunner
     from sal_modules import fog
 
     dataset = open_dataset("synthetic", scene="indoor", frames=8, sensor="rgbd")
@@ -539,7 +539,7 @@ def test_a_crash_after_writing_the_trajectory_keeps_it_and_its_ate(tmp_path, cra
 
 def test_a_crash_after_writing_an_unreadable_trajectory_is_not_scored(scripts, short, tmp_path):
     """Only a trajectory that this run wrote, that reads back and that matches the frames is scored."""
-    from pytest_sal.metrics import evaluate
+    from pytest_sal.analysis.metrics import evaluate
 
     argv = ["sh", "-c", f'"{sys.executable}" "$0" "$1"; kill -SEGV $$', str(scripts / "garbage.py"), "{output}"]
     result = create("command", argv=argv, sensor="mono", layout="folder").run(short, tmp_path / "w", timeout=30)
@@ -583,7 +583,7 @@ def test_the_executable_is_found_on_path_and_hashed(tmp_path):
 
 
 def test_name_is_shown_in_results_and_outcomes(scripts, tmp_path):
-    from pytest_sal.robustness import single_outcome
+    from pytest_sal.engine.requirement_runner import single_outcome
 
     system = create("command", argv=[sys.executable, str(drift_script(tmp_path / "s.py", 0.0)), "{sequence}", "{output}"], name="myslam", layout="tum")
     assert system.name == "myslam" and type(system).name == "command"
@@ -597,7 +597,7 @@ def test_name_is_shown_in_results_and_outcomes(scripts, tmp_path):
 
 
 def test_name_and_version_change_the_key(tmp_path):
-    from pytest_sal.cache_keys import cache_key
+    from pytest_sal.store.cache_keys import cache_key
 
     def key(**options):
         return cache_key(system=create("command", argv=["slam", "{sequence}"], **options).identity())
@@ -637,7 +637,7 @@ def test_a_depends_file_removed_after_creation_is_a_clear_error(tmp_path):
 
 
 def test_a_too_big_depends_folder_is_a_clear_error(tmp_path, monkeypatch):
-    import sal_wrappers.command as command
+    import sal_wrappers.external_program as command
 
     lib = tmp_path / "lib"
     lib.mkdir()
@@ -649,7 +649,7 @@ def test_a_too_big_depends_folder_is_a_clear_error(tmp_path, monkeypatch):
 
 
 def test_a_command_system_is_noisy_unless_it_says_it_is_deterministic() -> None:
-    from pytest_sal.trials import VotePolicy
+    from pytest_sal.engine.trial_runner import VotePolicy
 
     noisy = create("command", argv=["true"])
     steady = create("command", argv=["true"], deterministic=True)

@@ -11,7 +11,7 @@ from typing import Any
 import pytest
 import yaml
 
-from pytest_sal.cli import main
+from pytest_sal.cli.main import main
 from pytest_sal.testing import FakeSlam
 from sal_adapters.trajectory import Trajectory
 from sal_wrappers import SYSTEMS

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 import yaml
 
-from pytest_sal.cli import main
-from pytest_sal.experiment import (
+from pytest_sal.cli.main import main
+from pytest_sal.experiment.config import (
     ConfigError,
     build_modules,
     build_sequence,

@@ -33,8 +33,8 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from pytest_sal import experiment as schema
-from pytest_sal.experiment import build_modules, build_sequence, load_config
+from pytest_sal.experiment import config as schema
+from pytest_sal.experiment.config import build_modules, build_sequence, load_config
 from sal_adapters import DATASETS, SalError
 from sal_adapters.cache_dir import no_cache_writes
 from sal_adapters.images import write_image

@@ -18,9 +18,9 @@ import pytest
 import yaml
 from browser import find_picture, needs_chromium, screenshot
 
-from pytest_sal.cli import main
-from pytest_sal.experiment import build_sequence, load_config
-from pytest_sal.experiment_report import THUMBNAIL_WIDTH, write_experiment_report
+from pytest_sal.cli.main import main
+from pytest_sal.experiment.config import build_sequence, load_config
+from pytest_sal.report.experiment_page import THUMBNAIL_WIDTH, write_experiment_report
 from sal_adapters import SalError
 from sal_adapters.images import read_image
 

@@ -11,7 +11,7 @@ import pytest
 from onnx import TensorProto, helper, numpy_helper
 
 import sal_modules
-from pytest_sal.features import (
+from pytest_sal.analysis.feature_tracking import (
     OrbExtractor,
     SuperPointExtractor,
     TrackingStats,
@@ -20,7 +20,7 @@ from pytest_sal.features import (
     parse_features,
     track_features,
 )
-from pytest_sal.superpoint import decode_superpoint
+from pytest_sal.analysis.superpoint import decode_superpoint
 from sal_adapters import open_dataset
 from sal_adapters.errors import SalError
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from pytest_sal.cli import main
+from pytest_sal.cli.main import main
 
 CONFIG = """\
 experiment: {name: feats, seed: 0}

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from pytest_sal.cli import main
+from pytest_sal.cli.main import main
 from sal_adapters import DatasetError, open_dataset, write_sequence
 from sal_adapters.layout_io import read_list
 from sal_adapters.textfiles import check_times

@@ -12,8 +12,8 @@ import pytest
 from plugin_suites import project, run
 from scipy.spatial.transform import Rotation
 
-from pytest_sal.experiment import ConfigError, parse_config
-from pytest_sal.kitti_metrics import (
+from pytest_sal.experiment.config import ConfigError, parse_config
+from pytest_sal.analysis.kitti_metrics import (
     KITTI_SEGMENTS_M,
     kitti_errors,
     kitti_odometry,
@@ -21,10 +21,10 @@ from pytest_sal.kitti_metrics import (
     segment_lengths,
     trajectory_distances,
 )
-from pytest_sal.metrics import AGGREGATED, evaluate
-from pytest_sal.outcome import Boundary, Outcome, Trial
-from pytest_sal.requirements import METRICS, Requirement, r_rel, t_rel
-from pytest_sal.robustness import failure_message
+from pytest_sal.analysis.metrics import AGGREGATED, evaluate
+from pytest_sal.engine.outcome import Boundary, Outcome, Trial
+from pytest_sal.engine.requirements import METRICS, Requirement, r_rel, t_rel
+from pytest_sal.engine.requirement_runner import failure_message
 from sal_adapters.errors import SalError
 from sal_adapters.trajectory import Trajectory
 from sal_modules import fog
@@ -302,7 +302,7 @@ def test_a_failed_test_says_why_its_kitti_metric_is_missing() -> None:
 def test_the_ini_segments_reach_the_plugins_trials(pytester: pytest.Pytester) -> None:
     """The 20-frame street is 19 m long: t_rel is missing with the devkit's lengths (the test
     fails, saying why) and scored with ``sal_kitti_segments = 5,10`` (the fake tracks it exactly)."""
-    project(pytester, "from pytest_sal.requirements import t_rel  # pytest_sal exports it once __init__ lists it\n\n@sal.at(fog.visibility_m, 100)\n@sal.require(t_rel < 5)\ndef test_kitti(sal_trial):\n    pass\n")
+    project(pytester, "from pytest_sal.engine.requirements import t_rel  # pytest_sal exports it once __init__ lists it\n\n@sal.at(fog.visibility_m, 100)\n@sal.require(t_rel < 5)\ndef test_kitti(sal_trial):\n    pass\n")
     missing = run(pytester, [])
     missing.assert_outcomes(failed=1)
     missing.stdout.fnmatch_lines(["*t_rel missing: the reference path is * m, too short for a segment of 100 m*failed: t_rel < 5 %*"])

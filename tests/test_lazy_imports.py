@@ -41,7 +41,7 @@ def loaded_after(code: str, cwd: Path) -> set[str]:
         ("import pytest_sal.plugin", frozenset()),
         ("import pytest_sal as sal; sal.__version__", frozenset()),
         ("import sal_adapters, sal_modules, sal_wrappers; sal_wrappers.SYSTEMS.names()", frozenset()),
-        ("from pytest_sal.cli import build_parser; build_parser().format_help()", frozenset({"yaml"})),  # the experiment config parser
+        ("from pytest_sal.cli.main import build_parser; build_parser().format_help()", frozenset({"yaml"})),  # the experiment config parser
     ],
     ids=["plugin", "pytest_sal", "packages", "sal --help"],
 )

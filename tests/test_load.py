@@ -1,4 +1,4 @@
-"""Machine load of paced runs (``sal_wrappers.load``): the fell-behind rule, re-pacing, the
+"""Machine load of paced runs (``sal_wrappers.pacing``): the fell-behind rule, re-pacing, the
 oversubscription warning, and the ``RunResult`` fields that carry them. Synthetic hand-over
 times only; the real ORB-SLAM3 runs are in test_orbslam3.py."""
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from sal_wrappers import RunResult, TrackState, oversubscribed_warning
-from sal_wrappers.load import LATE_PERIODS, MAX_LATE_SHARE, MAX_OVERRUN, MIN_PACE, fell_behind_reason, load_figures, machine_load, repace
+from sal_wrappers.pacing import LATE_PERIODS, MAX_LATE_SHARE, MAX_OVERRUN, MIN_PACE, fell_behind_reason, load_figures, machine_load, repace
 
 FPS = 10.0
 N = 100

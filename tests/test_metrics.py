@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from pytest_sal.metrics import (
+from pytest_sal.analysis.metrics import (
     AGGREGATED,
     RunMetrics,
     aggregate,

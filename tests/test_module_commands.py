@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from test_perturb import Square
 
-from pytest_sal.cli import main
+from pytest_sal.cli.main import main
 from sal_adapters.images import read_image
 from sal_modules import PERTURBATIONS
 

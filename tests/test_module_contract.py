@@ -14,7 +14,7 @@ import pytest
 from module_cases import ModuleCase, all_cases
 
 import sal_modules
-from pytest_sal.cli import main
+from pytest_sal.cli.main import main
 from sal_adapters import Sequence, open_dataset
 from sal_modules import (
     PERTURBATIONS,

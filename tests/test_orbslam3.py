@@ -37,9 +37,9 @@ from sal_adapters import Camera, Trajectory  # noqa: E402
 from sal_adapters.datasets import open_dataset  # noqa: E402
 from sal_wrappers import RunResult, SlamSystemError, TrackState, create  # noqa: E402
 from sal_wrappers import orbslam3 as orbslam3_module  # noqa: E402
-from sal_wrappers.child import ChildOutcome  # noqa: E402
-from pytest_sal.metrics import evaluate  # noqa: E402
-from sal_wrappers.load import repace  # noqa: E402
+from sal_wrappers.child_process import ChildOutcome  # noqa: E402
+from pytest_sal.analysis.metrics import evaluate  # noqa: E402
+from sal_wrappers.pacing import repace  # noqa: E402
 from sal_wrappers.orbslam3 import ORB_STATES, OrbSlam3, map_states, read_final_trajectory, segment_ids  # noqa: E402
 from sal_wrappers.orbslam3_settings import (  # noqa: E402
     VIEWER_KEYS,

@@ -29,7 +29,7 @@ from typing import Any
 
 import pytest
 
-from pytest_sal.cli import main
+from pytest_sal.cli.main import main
 from pytest_sal.testing import FakeSlam
 from sal_adapters import SalError, open_dataset, write_sequence
 from sal_adapters import atomic
@@ -78,7 +78,7 @@ def leftovers(root: Path) -> list[str]:
 
 def sal(*args: str | Path, cwd: Path, **kwargs: object) -> subprocess.Popen[bytes]:
     """``sal ARGS`` in a child process (the environment of this session: its isolated caches)."""
-    return subprocess.Popen([sys.executable, "-m", "pytest_sal.cli", *map(str, args)], cwd=cwd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, **kwargs)  # type: ignore[call-overload]
+    return subprocess.Popen([sys.executable, "-m", "pytest_sal.cli.main", *map(str, args)], cwd=cwd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, **kwargs)  # type: ignore[call-overload]
 
 
 def error_line(capsys: pytest.CaptureFixture[str]) -> str:
@@ -105,7 +105,7 @@ def test_dry_run_touches_nothing_on_disk(tmp_path: Path) -> None:
     config = write_config(work)
     before = snapshot(tmp_path)  # a fresh home: not even matplotlib's font list may appear
 
-    out = subprocess.run([sys.executable, "-m", "pytest_sal.cli", "perturb", str(config), "--dry-run", "--cache-dir", str(tmp_path / "trials")],
+    out = subprocess.run([sys.executable, "-m", "pytest_sal.cli.main", "perturb", str(config), "--dry-run", "--cache-dir", str(tmp_path / "trials")],
                          cwd=work, env=env, capture_output=True, text=True, timeout=300)
 
     assert out.returncode == 0, out.stderr
@@ -137,7 +137,7 @@ PAUSE_BEFORE_COMMIT = """
 import sys, time
 from pathlib import Path
 from sal_adapters.atomic import Replacement
-from pytest_sal.cli import main
+from pytest_sal.cli.main import main
 from pytest_sal.testing import FakeSlam
 
 def paused(self, target, text, write_text=Replacement.write_text):

@@ -20,7 +20,7 @@ from plugin_suites import (
     write_tracked,
 )
 
-from pytest_sal import cli
+from pytest_sal.cli import main as cli
 
 HISTORY_TESTS = '''
 

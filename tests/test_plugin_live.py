@@ -17,7 +17,7 @@ import re
 import pytest
 from plugin_suites import HEADER, SMALL_DATASET, outcomes, output, run
 
-from pytest_sal.outcome import Trial
+from pytest_sal.engine.outcome import Trial
 from pytest_sal.progress import trial_line
 
 CONFTEST = '''

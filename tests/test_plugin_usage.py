@@ -184,13 +184,13 @@ def test_a_path_option_written_with_a_space_is_refused_with_the_reason(pytester:
 
 def test_more_orbslam3_workers_than_cores_is_said_at_the_start(pytester: pytest.Pytester, monkeypatch: pytest.MonkeyPatch) -> None:
     # a machine with 2 cores and load average 9.3 (say, a shared CI runner): the header says so
-    import sal_wrappers.load
+    import sal_wrappers.pacing
 
-    monkeypatch.setattr(sal_wrappers.load, "machine_load", lambda: {"loadavg": [9.3, 9.0, 8.0], "cpus": 2, "usable_cpus": 2})
+    monkeypatch.setattr(sal_wrappers.pacing, "machine_load", lambda: {"loadavg": [9.3, 9.0, 8.0], "cpus": 2, "usable_cpus": 2})
     pytester.makepyfile(test_plain="def test_x():\n    pass\n")
     said = pytester.runpytest("-p", "no:cacheprovider", "--sal-no-history", "-o", "sal_system=orbslam3")
     said.stdout.fnmatch_lines(["pytest-sal: 1 worker(s) x ORB-SLAM3 (about 1.5 cores each) on 2 cores with load average 9.3*re-paced and marked*"])
     quiet = pytester.runpytest("-p", "no:cacheprovider", "--sal-no-history", "-o", "sal_system=reference_vo")
     assert "ORB-SLAM3" not in quiet.stdout.str()  # another system: nothing to say
-    monkeypatch.setattr(sal_wrappers.load, "machine_load", lambda: {"loadavg": [0.2, 0.2, 0.2], "cpus": 16, "usable_cpus": 16})
+    monkeypatch.setattr(sal_wrappers.pacing, "machine_load", lambda: {"loadavg": [0.2, 0.2, 0.2], "cpus": 16, "usable_cpus": 16})
     assert "worker(s)" not in pytester.runpytest("-p", "no:cacheprovider", "--sal-no-history", "-o", "sal_system=orbslam3").stdout.str()

@@ -24,7 +24,7 @@ import pytest
 
 from sal_adapters import open_dataset
 from sal_wrappers import create
-from sal_wrappers.child import run_child
+from sal_wrappers.child_process import run_child
 from sal_wrappers.process_group import run_process_group
 
 pytestmark = pytest.mark.skipif(not Path("/proc/self/environ").is_file(), reason="finding the processes a run leaves needs Linux's /proc")
@@ -98,7 +98,7 @@ RUN_CHILD_PARENT = textwrap.dedent(
     """\
     import os, sys
     from pathlib import Path
-    from sal_wrappers.child import run_child
+    from sal_wrappers.child_process import run_child
 
     os.environ["LEAK_MARKER"] = sys.argv[1]
     outcome = run_child("leaky_entry:main", {"ready": sys.argv[3], "exit": "--exit" in sys.argv}, iter([1, 2]), Path(sys.argv[2]), timeout=60)
@@ -110,7 +110,7 @@ LEAKY_ENTRY = textwrap.dedent(
     """\
     import os, sys, time
     from pathlib import Path
-    from sal_wrappers.child import write_result
+    from sal_wrappers.child_process import write_result
 
 
     def main(header, frames, result_path):

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from browser import find_picture, needs_chromium, screenshot
 
-from pytest_sal.outcome import Boundary, Outcome, Trial
-from pytest_sal.report import (
+from pytest_sal.engine.outcome import Boundary, Outcome, Trial
+from pytest_sal.report.outcome_report import (
     headline,
     markdown_report,
     metric_plot,
@@ -21,7 +21,7 @@ from pytest_sal.report import (
     write_html_report,
     write_markdown,
 )
-from pytest_sal.report_html import esc, metric_figure
+from pytest_sal.report.html import esc, metric_figure
 
 FOG_REQ = "ate_rmse < 1.5 m and tracking_rate >= 0.9 wherever fog.visibility_m >= 25 m"
 XSS_ID = "tests/robustness/test_weather.py::test_rain[<script>alert(1)</script>]"

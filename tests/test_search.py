@@ -10,9 +10,9 @@ import pytest
 
 import pytest_sal as sal
 from pytest_sal import InvalidRequirement, ate_rmse, tracking_rate
-from pytest_sal.requirements import Requirement
-from pytest_sal.search import SearchSpace, boundary_search
-from pytest_sal.trials import VotePolicy
+from pytest_sal.engine.requirements import Requirement
+from pytest_sal.engine.boundary_search import SearchSpace, boundary_search
+from pytest_sal.engine.trial_runner import VotePolicy
 from sal_modules import fog, frame_drop, motion_blur, night, rain, sensor_noise
 
 FOG = SearchSpace(mild=100_000.0, severe=1.0)  # visibility gets worse when lower

@@ -8,7 +8,7 @@ from __future__ import annotations
 import pytest
 
 import pytest_sal as sal
-from pytest_sal.requirements import InvalidRequirement
+from pytest_sal.engine.requirements import InvalidRequirement
 from sal_adapters.plugins import PluginError
 from sal_adapters.suggest import closest, suggestion
 from sal_modules import ParameterError, create, fog, module_class, night

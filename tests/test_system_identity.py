@@ -11,8 +11,8 @@ from pathlib import Path
 import pytest
 
 import sal_wrappers.base as base
-import sal_wrappers.reference_vo as reference_vo
-from pytest_sal.cache_keys import cache_key
+import sal_wrappers.reference_vo.system as reference_vo
+from pytest_sal.store.cache_keys import cache_key
 from pytest_sal.testing import FakeSlam
 from sal_wrappers import SlamSystemError, create
 from sal_wrappers.base import file_sha256
@@ -46,7 +46,7 @@ def test_file_sha256_reads_a_file_once_per_version(tmp_path: Path, monkeypatch: 
 # -- reference_vo ----------------------------------------------------------------------------------
 def test_reference_vo_identity_covers_its_sources(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     names = [p.name for p in reference_vo.source_files()]
-    assert names[0] == "reference_vo.py" and {"vo_geometry.py", "vo_odometry.py"} <= set(names)
+    assert {"system.py", "geometry.py", "odometry.py", "bundle.py"} <= set(names)
     copies = [Path(shutil.copy(p, tmp_path / p.name)) for p in reference_vo.source_files()]
     monkeypatch.setattr(reference_vo, "source_files", lambda: copies)
     system = create("reference_vo")

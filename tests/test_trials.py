@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 
 from pytest_sal import tracking_rate
-from pytest_sal.cache import ContentCache
-from pytest_sal.requirements import Requirement
+from pytest_sal.store.trial_cache import ContentCache
+from pytest_sal.engine.requirements import Requirement
 from pytest_sal.testing import FakeSlam, applied_value
-from pytest_sal.trials import TrialRunner, aggregate_metrics, cached_sequence
+from pytest_sal.engine.trial_runner import TrialRunner, aggregate_metrics, cached_sequence
 from sal_adapters import open_dataset
 from sal_modules import create, fog, perturb
 
@@ -112,8 +112,8 @@ def test_an_edge_that_leaves_the_dataset_unchanged_is_refused_before_any_run(tmp
     # fog at 100 km in a room (depths under 10 m): 255 x (1 - exp(-3.912 x 10 / 1e5)) = 0.1 grey levels
     import pytest
 
-    from pytest_sal.requirements import InvalidRequirement
-    from pytest_sal.robustness import SearchSettings, search_outcome
+    from pytest_sal.engine.requirements import InvalidRequirement
+    from pytest_sal.engine.requirement_runner import SearchSettings, search_outcome
 
     calls = tmp_path / "calls.jsonl"
     room = runner(tmp_path, FakeSlam(calls_file=str(calls)))

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pytest_sal.cli import main
+from pytest_sal.cli.main import main
 from sal_adapters import SalError, open_dataset, textfiles
 from sal_wrappers import vocabulary as vocab_module
 from sal_wrappers.vocabulary import (

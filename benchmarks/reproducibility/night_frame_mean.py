@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from pytest_sal import ate_rmse
-from pytest_sal.requirements import Requirement
+from pytest_sal.engine.requirements import Requirement
 from sal_adapters import open_dataset
 from sal_modules import night, perturb
 

@@ -93,7 +93,7 @@ if [[ -n ${GITHUB_STEP_SUMMARY:-} ]]; then
 fi
 
 if [[ $mode == main && -d $SAL_HISTORY ]]; then
-    "$PYTHON" -m pytest_sal.cli history prune --keep "$SAL_KEEP" --history-dir "$SAL_HISTORY"
+    "$PYTHON" -m pytest_sal.cli.main history prune --keep "$SAL_KEEP" --history-dir "$SAL_HISTORY"
 elif [[ $mode == pr ]] && ((status == 1)); then
     echo "sal-gate: a test failed or regressed against '$SAL_BASELINE'. A deliberate change is accepted by merging it: the main run saves the new baseline." >&2
 fi

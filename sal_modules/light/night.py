@@ -48,7 +48,7 @@ import cv2
 import numpy as np
 
 from sal_modules.base import ModuleContext
-from sal_modules.buffers import scratch
+from sal_modules.work_buffers import scratch
 from sal_modules.colour import srgb_to_linear
 from sal_modules.errors import ModuleError
 from sal_modules.light.sensor import (

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sal_modules.buffers import scratch
+from sal_modules.work_buffers import scratch
 from sal_modules.colour import srgb_to_linear
 from sal_modules.light.sensor import (
     SensorModule,

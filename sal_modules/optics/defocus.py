@@ -35,7 +35,7 @@ import cv2
 import numpy as np
 
 from sal_modules.base import ModuleContext, Perturbation
-from sal_modules.buffers import scratch
+from sal_modules.work_buffers import scratch
 from sal_modules.errors import ModuleError
 from sal_modules.params import Param
 

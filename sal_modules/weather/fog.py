@@ -46,7 +46,7 @@ import numpy as np
 
 from sal_adapters.camera import Camera
 from sal_modules.base import ModuleContext, Perturbation
-from sal_modules.buffers import scratch
+from sal_modules.work_buffers import scratch
 from sal_modules.colour import DECODE_TABLE, encode_table, srgb_decode, srgb_to_linear
 from sal_modules.params import Param
 from sal_modules.weather.noise import GradientNoise

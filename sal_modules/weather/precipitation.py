@@ -60,7 +60,7 @@ import cv2
 import numpy as np
 
 from sal_modules.base import ModuleContext, Perturbation
-from sal_modules.buffers import scratch
+from sal_modules.work_buffers import scratch
 from sal_modules.params import Param
 from sal_modules.weather.fog import (
     blend_srgb,

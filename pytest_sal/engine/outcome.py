@@ -1,0 +1,294 @@
+"""What a robustness test found: its trials, the boundary interval and the verdict.
+
+``Outcome`` is JSON-ready (``to_dict`` / ``from_dict``): it travels from xdist workers to the
+controller on the test report, goes into the history store, the reports and JUnit XML.
+Values are in the parameter's declared unit (what ``sal modules`` prints: lx, ISO, m, ...).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from dataclasses import asdict, dataclass, field
+from typing import Any, NoReturn
+
+from sal_adapters.suggest import suggestion
+
+__all__ = ["TRIAL_METRICS", "Boundary", "Outcome", "Trial", "TrialMetrics", "failures_first"]
+
+#: Metrics aggregated over runs (median) into a trial's metrics.
+TRIAL_METRICS = ("ate_rmse", "rpe_trans", "rpe_rot", "t_rel", "r_rel", "tracking_rate", "scale_error", "first_tracked", "maps")
+
+
+class TrialMetrics(dict[str, Any]):
+    """A trial's metrics, read like ``RunMetrics`` or like the dict they are stored as.
+
+    ``m.ate_rmse == m["ate_rmse"]`` (m), ``m.get(name)``, ``name in m``, ``m.items()``; equal to a
+    dict with the same items and written to JSON as one. A metric of ``TRIAL_METRICS`` a trial
+    lacks (no run tracked, an older history) reads as ``None``; an unknown name is an
+    ``AttributeError`` (``KeyError`` for ``m[name]``) with the closest name or the known ones.
+    Read-only: a trial's metrics are its runs' medians (``TrialMetrics({**m, "maps": 2})`` for
+    a changed copy).
+    """
+
+    __slots__ = ()
+
+    def __missing__(self, name: str) -> Any:
+        if name in TRIAL_METRICS:
+            return None
+        raise KeyError(self._unknown(name))
+
+    def __getattr__(self, name: str) -> Any:
+        if name.startswith("_"):
+            raise AttributeError(name)
+        try:
+            return self[name]
+        except KeyError:
+            raise AttributeError(self._unknown(name)) from None
+
+    def __dir__(self) -> list[str]:
+        return sorted({*super().__dir__(), *TRIAL_METRICS, *(k for k in self if k.isidentifier())})
+
+    def __reduce__(self) -> tuple[type, tuple[dict[str, Any]]]:
+        return TrialMetrics, (dict(self),)
+
+    def _unknown(self, name: str) -> str:
+        return f"trial metrics have no {name!r}" + suggestion(name, [*TRIAL_METRICS, *self], "metrics")
+
+    def _read_only(self, *args: Any, **kwargs: Any) -> NoReturn:
+        raise TypeError("trial metrics are read-only (the medians of the trial's runs); make a changed copy: TrialMetrics({**metrics, name: value})")
+
+    __setitem__ = __delitem__ = clear = pop = popitem = setdefault = update = __ior__ = _read_only  # type: ignore[assignment]
+
+
+@dataclass
+class Trial:
+    """One severity evaluated by one or more runs.
+
+    Attributes:
+        value: the searched parameter's value (its declared unit).
+        passed: the majority of runs met every criterion (a tie fails).
+        metrics: aggregated metrics (median over runs): ``ate_rmse``, ``rpe_trans``,
+            ``rpe_rot``, ``t_rel``, ``r_rel``, ``tracking_rate``, ``scale_error``,
+            ``first_tracked``, ``maps`` (``None`` where not available; ``kitti_missing`` says
+            why ``t_rel`` / ``r_rel`` are), as ``TrialMetrics`` (``metrics.ate_rmse`` or
+            ``metrics["ate_rmse"]``; a dict given is wrapped).
+        runs: per-run metrics (``RunMetrics.to_dict()``), failure reasons included, with
+            ``passed`` (that run met every criterion) and ``cached``.
+        cached: every run came from the cache (no SLAM run).
+        wall_time_s: time spent on this trial (s), perturbing and SLAM included.
+        failed: the criteria that did not hold on the median metrics, in words.
+        artifacts: files made for reports, by kind: ``frame`` (an example perturbed frame,
+            PNG), ``trajectory`` (ground truth and estimate, PNG).
+    """
+
+    value: float
+    passed: bool
+    metrics: TrialMetrics = field(default_factory=TrialMetrics)
+    runs: list[dict[str, Any]] = field(default_factory=list)
+    cached: bool = False
+    wall_time_s: float = 0.0
+    failed: list[str] = field(default_factory=list)
+    artifacts: dict[str, str] = field(default_factory=dict)
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if name == "metrics" and not isinstance(value, TrialMetrics):
+            value = TrialMetrics(value)
+        super().__setattr__(name, value)
+
+    @property
+    def passes(self) -> int:
+        """Runs that met every criterion."""
+        return sum(bool(r.get("passed", self.passed)) for r in self.runs)
+
+    @property
+    def fails(self) -> int:
+        """Runs that did not (a run the machine starved, which fell behind the sensor clock
+        even re-paced, is not counted: it abstains)."""
+        return len(self.runs) - self.passes - self.abstained
+
+    @property
+    def abstained(self) -> int:
+        """Runs that failed only after falling behind the sensor clock: no vote."""
+        return sum(bool(r.get("abstained")) for r in self.runs)
+
+    @property
+    def agreeing(self) -> int:
+        """Runs whose vote agrees with the trial's verdict."""
+        return self.passes if self.passed else self.fails
+
+    @property
+    def voting(self) -> int:
+        """Runs that voted (all but the starved ones)."""
+        return self.passes + self.fails
+
+    def votes(self) -> str:
+        """``3 of 3 runs passed``, ``2 of 3 runs failed``: the runs behind the verdict."""
+        voting = self.voting
+        text = f"{self.agreeing} of {voting} run{'s' if voting != 1 else ''} {'passed' if self.passed else 'failed'}"
+        return text + (f" ({self.abstained} starved by the machine, not counted)" if self.abstained else "")
+
+
+@dataclass
+class Boundary:
+    """The failure boundary lies between ``pass_value`` and ``fail_value`` (either may be
+    ``None`` when the search range did not bracket it)."""
+
+    pass_value: float | None
+    fail_value: float | None
+    unit: str = ""
+
+    def text(self) -> str:
+        """``14-16 m``, ``> 1 m (never failed)``, ``< 100000 m (never passed)``."""
+        unit = f" {self.unit}" if self.unit else ""
+        if self.pass_value is not None and self.fail_value is not None:
+            lo, hi = sorted((self.pass_value, self.fail_value))
+            return f"{lo:.4g}{'-' if lo >= 0 else ' to '}{hi:.4g}{unit}"
+        if self.pass_value is not None:
+            return f"beyond {self.pass_value:.4g}{unit} (passed everywhere searched)"
+        if self.fail_value is not None:
+            return f"beyond {self.fail_value:.4g}{unit} (failed everywhere searched)"
+        return "unknown"
+
+
+@dataclass
+class Outcome:
+    """The result of one robustness test (one boundary search, or one sweep level).
+
+    Attributes:
+        test_id: pytest node id.
+        system: SLAM system name and ``system_options``.
+        dataset: the dataset's name and ``dataset_fingerprint``.
+        parameter: the searched parameter's label (``fog.visibility_m``), ``worse`` its
+            direction (``lower``/``higher``), ``edge`` the envelope's edge value.
+        requirement: the requirement in words; ``criteria`` its pass criteria as
+            ``(metric, op, threshold)`` and ``envelope`` its envelope without the parameter
+            (``>= 25 m``; empty without one).
+        verdict: ``passed``, ``failed`` or ``flaky``.
+        boundary: the interval found.
+        termination: ``tolerance``, ``max_trials``, ``not_bracketed``, ``domain_resolution``
+            (``single`` for a sweep level or ``sal.at`` point).
+        trials: every trial, in order.
+        contradictions: trials contradicting monotonicity, in words.
+        margin: distance from the envelope's edge to the boundary's pass end, towards the
+            severe side (positive: the system copes beyond the requirement).
+        previous: the boundary of the same test in the history, when compared.
+        regression: why the comparison failed the test, when it did.
+        comparison: what it was compared with (``main (run 0003, commit 1a2b3c4)``, and a
+            note when that ran on another machine or system version), or why it was not
+            (``not compared: ...``); empty without ``--sal-compare``.
+        reproduction: one line that re-runs the deciding trial.
+        commit, machine: where it ran (``machine``: the CPU model and cores).
+        system_version: ``SlamSystem.version_text()`` of the system that ran.
+    """
+
+    test_id: str
+    system: str
+    dataset: str
+    parameter: str
+    worse: str
+    edge: float | None
+    requirement: str
+    verdict: str
+    boundary: Boundary
+    termination: str
+    trials: list[Trial] = field(default_factory=list)
+    contradictions: list[str] = field(default_factory=list)
+    margin: float | None = None
+    previous: Boundary | None = None
+    regression: str | None = None
+    comparison: str = ""
+    reproduction: str = ""
+    system_options: dict[str, Any] = field(default_factory=dict)
+    dataset_fingerprint: str = ""
+    seed: int = 0
+    commit: str = ""
+    machine: str = ""
+    system_version: str = ""
+    criteria: list[tuple[str, str, float]] = field(default_factory=list)
+    envelope: str = ""
+
+    @property
+    def passed(self) -> bool:
+        return self.verdict == "passed" and self.regression is None
+
+    @property
+    def cached_trials(self) -> int:
+        return sum(t.cached for t in self.trials)
+
+    @property
+    def runs(self) -> int:
+        """SLAM runs behind the outcome (cached ones included)."""
+        return sum(len(t.runs) for t in self.trials)
+
+    def end_trials(self) -> tuple[Trial | None, Trial | None]:
+        """The trials at the bracket's pass and fail ends (the last trial at each value)."""
+
+        def at(value: float | None) -> Trial | None:
+            return next((t for t in reversed(self.trials) if value is not None and t.value == value), None)
+
+        return at(self.boundary.pass_value), at(self.boundary.fail_value)
+
+    def confidence(self) -> str:
+        """How sure the result is, from the runs behind the deciding verdicts:
+        ``edge 3 of 3 runs passed; pass end 3 of 3 runs passed, fail end 4 of 5 runs failed``,
+        or ``1 run per trial`` (a deterministic system)."""
+        if not self.trials or all(len(t.runs) <= 1 for t in self.trials):
+            return "1 run per trial"
+        parts = [f"edge {self.trials[0].votes()}" if self.termination != "single" else self.trials[0].votes()]
+        ends = [f"{label} {t.votes()}" for label, t in zip(("pass end", "fail end"), self.end_trials()) if t is not None and t is not self.trials[0]]
+        return "; ".join(parts + ([", ".join(ends)] if ends else []))
+
+    def to_dict(self) -> dict[str, Any]:
+        data = dict(asdict(self), confidence=self.confidence())
+        for trial in data["trials"]:
+            trial["metrics"] = dict(trial["metrics"])  # plain JSON-ready dicts, as stored
+        return data
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Outcome:
+        """Inverse of ``to_dict``; an outcome stored in an older unit is converted
+        (``pytest_sal.engine.legacy_units``)."""
+        from pytest_sal.engine.legacy_units import upgrade_outcome
+
+        _check_numbers(data)
+        data = upgrade_outcome(dict(data))
+        data.pop("confidence", None)
+        data["boundary"] = Boundary(**data["boundary"])
+        data["previous"] = None if data.get("previous") is None else Boundary(**data["previous"])
+        data["trials"] = [Trial(**{k: v for k, v in t.items() if k != "repeat"}) for t in data.get("trials", [])]
+        for trial in data["trials"]:
+            trial.metrics = {k: None if isinstance(v, float) and not math.isfinite(v) else v for k, v in trial.metrics.items()}
+        data["criteria"] = [(str(m), str(op), float(v)) for m, op, v in data.get("criteria", [])]
+        return cls(**data)
+
+
+def failures_first(outcomes: Iterable[Outcome]) -> list[Outcome]:
+    """``outcomes`` with the tests that failed (flaky and regressed ones included: every one
+    not ``passed``) first, then the rest, each group in its given order: what a report lists."""
+    outcomes = list(outcomes)
+    return [o for o in outcomes if not o.passed] + [o for o in outcomes if o.passed]
+
+
+def _check_numbers(data: Any) -> None:
+    """Refuse a stored outcome whose values and bounds are not finite numbers or null (a
+    hand-edited history: ``pass_value: "abc"`` or ``NaN``), naming the key: ``ValueError``.
+    Metrics are free-form (``failures`` is a list); a NaN metric is read as null."""
+    if not isinstance(data, dict) or not isinstance(data.get("boundary"), dict):
+        raise ValueError("not an outcome (no boundary)")
+    places: list[tuple[str, Any]] = [("edge", data.get("edge")), ("margin", data.get("margin"))]
+    for name in ("boundary", "previous"):
+        bounds = data.get(name) or {}
+        if not isinstance(bounds, dict):
+            raise ValueError(f"{name} is not a mapping")
+        places += [(f"{name}.{end}", bounds.get(end)) for end in ("pass_value", "fail_value")]
+    trials = data.get("trials") or []
+    if not isinstance(trials, list) or not all(isinstance(t, dict) for t in trials):
+        raise ValueError("trials is not a list of trials")
+    for i, trial in enumerate(trials):
+        places.append((f"trials[{i}].value", trial.get("value", "missing")))
+        if not isinstance(trial.get("metrics") or {}, dict):
+            raise ValueError(f"trials[{i}].metrics is not a mapping")
+    for key, value in places:
+        if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value)):
+            raise ValueError(f"{key} = {str(value)[:40]!r} is not a finite number")

@@ -1,0 +1,176 @@
+"""From a requirement to an ``Outcome``: the search range and tolerance, the boundary search
+over trials, the verdict, the margin and the words a failed test shows."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from pytest_sal.engine.outcome import Boundary, Outcome, Trial
+from pytest_sal.engine.requirements import InvalidRequirement, Requirement
+from pytest_sal.engine.boundary_search import SearchSpace, boundary_search
+from sal_modules.param_refs import ParamRef
+
+if TYPE_CHECKING:  # the plugin reads SearchSettings at configure time, before any trial runs
+    from pytest_sal.engine.trial_runner import TrialRunner
+
+__all__ = ["SearchSettings", "failure_message", "search_outcome", "search_space", "single_outcome"]
+
+
+@dataclass(frozen=True)
+class SearchSettings:
+    """Defaults a requirement may override (ini ``sal_tolerance``, ``sal_max_trials``).
+
+    Attributes:
+        tolerance_pct: default tolerance: the search stops when the bracket's width is at most
+            this percent of its larger end (20-22 m at 10 %), which suits linear parameters and
+            ones searched over decades (0.08-0.09 Mbit/s) alike.
+        max_trials: default trial budget.
+    """
+
+    tolerance_pct: float = 10.0
+    max_trials: int = 8
+
+
+def search_space(ref: ParamRef, search_range: tuple[float, float] | None = None) -> SearchSpace:
+    """Mild and severe ends of the parameter's search range (or of ``search_range``)."""
+    scale = ref.param.search_space()
+    lo, hi = (scale.min, scale.max) if search_range is None else sorted(search_range)
+    mild, severe = (hi, lo) if ref.param.worse == "lower" else (lo, hi)
+    return SearchSpace(mild=float(mild), severe=float(severe), domain=scale.domain, scale=scale.scale)
+
+
+def search_outcome(
+    runner: TrialRunner,
+    requirement: Requirement,
+    settings: SearchSettings,
+    test_id: str,
+    warm_start: tuple[float | None, float | None] | None = None,
+) -> Outcome:
+    """Run the boundary search of ``requirement`` with ``runner`` and describe what it found."""
+    envelope = requirement.envelope
+    assert envelope is not None
+    ref = envelope.ref
+    space = search_space(ref, requirement.options.get("search_range"))
+    edge = envelope.value
+    tolerance = requirement.options.get("tolerance")
+    rel_tolerance = None if tolerance is not None else settings.tolerance_pct / 100
+    max_trials = requirement.options.get("max_trials", settings.max_trials)
+    unchanged = runner.unchanged_frames(edge)
+    if unchanged is not None:
+        raise InvalidRequirement(
+            f"{envelope}: the envelope's edge leaves the frames of {runner.dataset.name} unchanged (frames "
+            f"{', '.join(map(str, unchanged))} differ from the clean ones by rounding only), so the test would pass whatever "
+            f"the system does; bound a severity that perturbs this dataset"
+        )
+
+    def evaluate(value: float) -> tuple[bool, Trial]:
+        trial = runner.evaluate(value)
+        return trial.passed, trial
+
+    result = boundary_search(evaluate, space, edge, tolerance, max_trials, warm_start, judge=runner, rel_tolerance=rel_tolerance)
+    verdict = "flaky" if result.flaky else "passed" if result.edge_passed else "failed"
+    boundary = Boundary(result.pass_value, result.fail_value, ref.unit)
+    trials = [point.info for point in result.trials]
+    return _outcome(runner, requirement, test_id, verdict, boundary, result.termination, trials, result.contradictions)
+
+
+def single_outcome(runner: TrialRunner, requirement: Requirement, test_id: str, value: float) -> Outcome:
+    """The outcome of one explicit point (``sal.sweep`` level or ``sal.at``), its verdict
+    confirmed like an envelope's edge."""
+    trial = runner.evaluate(value)
+    runner.confirm(trial)
+    boundary = Boundary(value if trial.passed else None, None if trial.passed else value, runner.ref.unit)
+    return _outcome(runner, requirement, test_id, "passed" if trial.passed else "failed", boundary, "single", [trial], [])
+
+
+def _outcome(
+    runner: TrialRunner,
+    requirement: Requirement,
+    test_id: str,
+    verdict: str,
+    boundary: Boundary,
+    termination: str,
+    trials: list[Trial],
+    contradictions: list[str],
+) -> Outcome:
+    ref = runner.ref
+    edge = requirement.envelope.value if requirement.envelope is not None else None
+    margin = None
+    if edge is not None and boundary.pass_value is not None:
+        margin = (edge - boundary.pass_value) if ref.param.worse == "lower" else (boundary.pass_value - edge)
+    deciding = edge if edge is not None else trials[0].value
+    reproduction = (
+        f"@sal.at({ref.label}, {deciding:g})  # {ref.unit or 'no unit'}; seed {runner.seed}, up to {runner.policy.max_runs} run(s), "
+        f"system {runner.system.name}, dataset {runner.dataset.name}"
+    )
+    return Outcome(
+        test_id=test_id,
+        system=runner.system.name,
+        dataset=runner.dataset.name,
+        parameter=ref.label,
+        worse=str(ref.param.worse),
+        edge=edge,
+        requirement=str(requirement),
+        criteria=[(c.metric.name, c.op, c.threshold) for c in requirement.criteria],
+        envelope=requirement.envelope.condition if requirement.envelope is not None else "",
+        verdict=verdict,
+        boundary=boundary,
+        termination=termination,
+        trials=trials,
+        contradictions=contradictions,
+        margin=margin,
+        reproduction=reproduction,
+        system_options=runner.system.options(),
+        dataset_fingerprint=runner.dataset.fingerprint,
+        seed=runner.seed,
+    )
+
+
+def _metrics_text(metrics: dict[str, Any], judged: tuple[str, ...] = ()) -> str:
+    """The trial's main metrics and those ``judged`` by a criterion; a judged KITTI metric
+    that is missing says why (the sequence is shorter than the shortest segment...)."""
+    shown = []
+    for name in dict.fromkeys(("ate_rmse", "tracking_rate", "rpe_trans", "scale_error", *judged)):
+        value = metrics.get(name)
+        if value is not None:
+            shown.append(f"{name} {value:.4g}")
+        elif name in ("t_rel", "r_rel") and metrics.get("kitti_missing"):
+            shown.append(f"{name} missing: {metrics['kitti_missing']}")
+    failures = metrics.get("failures") or []
+    if failures:
+        shown.append(f"run failed: {failures[0]}")
+    return ", ".join(shown) or "no metrics (nothing tracked)"
+
+
+def failure_message(outcome: Outcome) -> str:
+    """What a failed (or flaky) robustness test says: the requirement, where it failed, the
+    boundary, the metrics at both ends and a one-line reproduction."""
+    unit = f" {outcome.boundary.unit}" if outcome.boundary.unit else ""
+    first = outcome.trials[0]
+    judged = tuple(name for name, _, _ in outcome.criteria)
+    lines = []
+    if outcome.verdict == "flaky":
+        lines.append(
+            f"FLAKY: {outcome.requirement}: at the edge {outcome.parameter} = {first.value:g}{unit} the runs disagree "
+            f"({first.passes} passed, {first.fails} failed): the edge sits on the system's failure boundary"
+        )
+    elif outcome.verdict == "passed":  # failed by a --sal-compare-fail check only
+        lines.append(f"regressed against the history (the requirement is met): {outcome.requirement}")
+        lines.append(f"  at {outcome.parameter} = {first.value:g}{unit}: {_metrics_text(first.metrics, judged)}")
+    else:
+        lines.append(f"requirement not met: {outcome.requirement}")
+        lines.append(f"  at {outcome.parameter} = {first.value:g}{unit}: {_metrics_text(first.metrics, judged)}; failed: {', '.join(first.failed)}")
+    lines.append(
+        f"  boundary: {outcome.parameter} {outcome.boundary.text()} ({len(outcome.trials)} trials, {outcome.runs} runs, "
+        f"{outcome.termination}); {outcome.confidence()}"
+    )
+    for label, trial in zip(("pass end", "fail end"), outcome.end_trials()):
+        if trial is not None:
+            lines.append(f"  {label} {trial.value:g}{unit}: {_metrics_text(trial.metrics, judged)} ({trial.votes()})")
+    for text in outcome.contradictions:
+        lines.append(f"  not monotonic: {text}")
+    if outcome.regression:
+        lines.append(f"  regression: {outcome.regression}")
+    lines.append(f"  reproduce: {outcome.reproduction}")
+    return "\n".join(lines)

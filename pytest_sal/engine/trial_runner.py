@@ -1,0 +1,365 @@
+"""One trial: perturb the dataset at one severity, run the system, score each run with evo,
+and judge the requirement by a vote of runs. Runs are cached content-addressed, one by one.
+
+A deterministic system (``reference_vo``) gets one run per trial. A noisy one (ORB-SLAM3 is
+multi-threaded and uses RANSAC: about one run in six splits its map on a clean 51-frame KITTI
+sequence) gets a sequential vote (``VotePolicy``): runs are added until one verdict leads by
+``lead`` runs or ``max_runs`` are spent, so one unlucky run never decides a bisection step. The
+search asks for a stronger lead (``confirm_lead``) at the envelope's edge and at the final
+bracket's ends. A trial's metrics are the median over its runs; its verdict is the majority.
+
+The cache key of a run holds everything that changes its result: the dataset fingerprint, the
+configured module (name, version, every parameter), the seed, the system's identity (name,
+version, options, the content of the files it runs), the run's number and the runner version.
+An identical run in a later session, or in the other xdist worker, is read back instead of
+run again; a trial that needs more runs than were cached runs only the missing ones. A stored
+run whose record lacks what the judge reads (``run_record_problem``) is discarded and run again.
+A run whose failure the machine decided (``machine_failure``: a timeout on a starved or
+oversubscribed machine, out of memory) counts in this session and is not stored, so the next
+session runs it again; its run says why under ``not_cached``.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+import signal
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from pytest_sal.store.trial_cache import ContentCache
+from pytest_sal.store.cache_keys import cache_key
+from pytest_sal.analysis.kitti_metrics import KITTI_SEGMENTS_M
+from pytest_sal.analysis.metrics import evaluate
+from pytest_sal.engine.outcome import TRIAL_METRICS, Trial
+from pytest_sal.engine.requirements import Requirement
+from sal_adapters import Sequence
+from sal_modules import perturb
+from sal_modules.param_refs import ParamRef
+from sal_wrappers import RunResult, SlamSystem, TrackState, machine_load
+
+__all__ = [
+    "NOISY_RUNS",
+    "RUNNER_VERSION",
+    "TrialRunner",
+    "VotePolicy",
+    "aggregate_metrics",
+    "cached_sequence",
+    "machine_failure",
+    "run_record_problem",
+]
+
+#: Bumped when a change here changes cached results (2: one cache entry per run; 3: entries
+#: carry a checksum, so entries of 2 are left to eviction and ``sal cache clear``; 4: records
+#: carry t_rel / r_rel and keys the KITTI segment lengths they were scored with).
+RUNNER_VERSION = 4
+
+
+def aggregate_metrics(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """Median of each metric over the runs. A metric missing (``None``) in more than half of
+    the runs is ``None``: a run that crashed or tracked nothing counts against the trial.
+    ``kitti_missing``: why ``t_rel`` / ``r_rel`` are missing (the first run's reason)."""
+    out: dict[str, Any] = {}
+    for name in TRIAL_METRICS:
+        values = [r.get(name) for r in runs]
+        known = [float(v) for v in values if v is not None and math.isfinite(float(v))]
+        out[name] = float(np.median(known)) if known and 2 * len(known) > len(values) else None
+    out["failures"] = [r["failure"] for r in runs if r.get("failure")]
+    out["kitti_missing"] = next((r["kitti_missing"] for r in runs if r.get("kitti_missing")), None) if out["t_rel"] is None else None
+    return out
+
+
+def run_record_problem(record: dict[str, Any]) -> str | None:
+    """What a stored run record lacks for judging, in words (``None``: it can be used):
+    ``metrics`` holds every metric of ``TRIAL_METRICS`` as a finite number or null, ``failure``
+    as text or null and ``starved`` as a bool; ``artifacts``, when present, maps names to paths."""
+    metrics = record.get("metrics")
+    if not isinstance(metrics, dict):
+        return "no 'metrics' object"
+    for name in TRIAL_METRICS:
+        if name not in metrics:
+            return f"metrics.{name} is missing"
+        value = metrics[name]
+        if value is not None and (not isinstance(value, numbers.Real) or isinstance(value, bool) or not math.isfinite(value)):
+            return f"metrics.{name} is {value!r:.40}, not a finite number or null"
+    if not isinstance(metrics.get("failure"), (str, type(None))):
+        return "metrics.failure is not text or null"
+    if not isinstance(metrics.get("starved"), bool):
+        return "metrics.starved is not true or false"
+    artifacts = record.get("artifacts", {})
+    if not isinstance(artifacts, dict) or not all(isinstance(v, str) for v in artifacts.values()):
+        return "artifacts is not an object of paths"
+    return None
+
+
+#: Words in a failure or log tail that say the run ran out of memory (Python, C++).
+_OUT_OF_MEMORY = ("MemoryError", "std::bad_alloc")
+
+
+def machine_failure(result: RunResult, load: dict[str, Any]) -> str | None:
+    """Why the machine, not the system, decided a failed run (it is then not cached), or ``None``.
+
+    The rule: a run that timed out (``failure`` starts with "timed out") is the machine's when
+    it fell behind the sensor clock (``RunResult.fell_behind``: starved even re-paced) or the
+    machine was busier than its cores when it started (``load``, a ``machine_load()`` taken
+    before the run: 1-minute load average above the usable cores); a timeout on a quiet machine
+    is the system's (it is too slow) and is cached. A run killed by SIGKILL without a timeout
+    (the kernel's out-of-memory killer), or whose failure or log ends in ``MemoryError`` or
+    ``std::bad_alloc``, ran out of memory: the machine's.
+    """
+    failure = result.failure
+    if failure is None:
+        return None
+    if failure.startswith("timed out"):
+        if result.fell_behind:
+            return f"timed out while starved: it fell behind the sensor clock ({result.load.get('fell_behind_reason')})"
+        cores = int(load.get("usable_cpus") or load["cpus"])
+        if float(load["loadavg"][0]) > cores:
+            return f"timed out on a busy machine: load average {float(load['loadavg'][0]):.1f} on {cores} cores when it started"
+        return None
+    if result.exit_status == -signal.SIGKILL:
+        return "killed by SIGKILL without a timeout: the out-of-memory killer, most likely"
+    if any(word in failure or word in result.log_tail for word in _OUT_OF_MEMORY):
+        return "ran out of memory"
+    return None
+
+
+@dataclass(frozen=True)
+class VotePolicy:
+    """How many runs decide a trial of a noisy system.
+
+    Attributes:
+        max_runs: at most this many runs per trial (1: every verdict rests on one run).
+        lead: a trial's verdict stands once passes and fails differ by this many runs.
+        confirm_lead: the lead the envelope's edge and the final bracket's ends need.
+        confirm_runs: at most this many runs when confirming (default ``max_runs + 2``).
+    """
+
+    max_runs: int = 1
+    lead: int = 2
+    confirm_lead: int = 3
+    confirm_runs: int | None = None
+
+    @classmethod
+    def for_system(cls, system: SlamSystem, runs: int | None) -> VotePolicy:
+        """``runs`` when given (the most runs per trial), else 1 for a deterministic system
+        and ``NOISY_RUNS`` for a noisy one."""
+        if runs is None:
+            runs = 1 if getattr(system, "deterministic", False) else NOISY_RUNS
+        return cls(max_runs=int(runs))
+
+    @property
+    def noisy(self) -> bool:
+        return self.max_runs > 1
+
+    def more(self, passes: int, fails: int, confirming: bool = False, abstained: int = 0) -> bool:
+        """Another run is needed: the lead is short (or no run voted) and runs are left; runs
+        that abstained (starved by the machine) count against the cap."""
+        lead, cap = (self.confirm_lead, self.confirm_runs or self.max_runs + 2) if confirming else (self.lead, self.max_runs)
+        short = abs(passes - fails) < lead if self.noisy else passes + fails == 0
+        return short and passes + fails + abstained < cap
+
+
+#: Most runs per trial of a noisy system when ``sal_runs`` is not set.
+NOISY_RUNS = 5
+
+
+@dataclass
+class TrialRunner:
+    """Runs trials of one robustness test.
+
+    Args:
+        dataset: the clean sequence.
+        ref: the searched parameter (``fog.visibility_m``); values are in its unit.
+        system: the SLAM system under test.
+        requirement: judges each run's metrics.
+        runs: the most runs per trial (``None``: 1 for a deterministic system, else
+            ``NOISY_RUNS``); see ``VotePolicy``.
+        seed: perturbation seed (the same random pattern at every severity).
+        cache: the run cache, or ``None`` to always run.
+        workdir: where runs write their logs and files.
+        timeout: seconds per run.
+        artifacts: also store an example frame and a trajectory plot with each computed trial
+            (for the HTML report; runs read from the cache keep what they were stored with).
+        cache_frames: write each perturbed sequence once into the cache, in its dataset's
+            layout, and give systems the copy read back from there: the same severity is then
+            perturbed once for every system and session (worth it for several systems or an
+            external ``command`` system; writing costs about 25-45 ms a frame).
+        progress: called with the trial after each evaluation and confirmation.
+        kitti_segments: segment lengths (m) of ``t_rel`` / ``r_rel`` (ini ``sal_kitti_segments``).
+    """
+
+    dataset: Sequence
+    ref: ParamRef
+    system: SlamSystem
+    requirement: Requirement
+    runs: int | None = None
+    seed: int = 0
+    cache: ContentCache | None = None
+    workdir: Path = Path(".")
+    timeout: float | None = 600.0
+    artifacts: bool = False
+    cache_frames: bool = False
+    progress: Callable[[Trial], None] | None = None
+    kitti_segments: tuple[float, ...] = KITTI_SEGMENTS_M
+
+    def __post_init__(self) -> None:
+        self.policy = VotePolicy.for_system(self.system, self.runs)
+
+    def key(self, value: float, number: int = 0) -> str:
+        """Cache key of run ``number`` at ``value``."""
+        return cache_key(
+            runner=RUNNER_VERSION,
+            dataset=self.dataset.fingerprint,
+            module=self.ref.module(value).to_dict(),
+            seed=self.seed,
+            system=self.system.identity(),
+            run=number,
+            kitti_segments_m=self.kitti_segments,
+        )
+
+    def unchanged_frames(self, value: float) -> list[int] | None:
+        """The positions checked when the module at ``value`` leaves the first, middle and last
+        frame as they were (both cameras), else ``None``. "As they were" allows rounding: no
+        pixel moves by more than 1 grey level and fewer than 1 % of them move at all (fog at
+        100 km in a 5 m room: 0.1 % by 1 level). Modules that work on the whole sequence at
+        once (video coding) are not checked: it would cost a full encode."""
+        module = self.ref.module(value)
+        steps = getattr(module, "steps", (module,))
+        if any(step.whole_sequence for step in steps):
+            return None
+        perturbed = perturb(self.dataset, module, seed=self.seed)
+        if len(perturbed) != len(self.dataset):
+            return None
+        positions = sorted({0, len(self.dataset) // 2, len(self.dataset) - 1})
+        for i in positions:
+            clean, changed = self.dataset[i], perturbed[i]
+            if not _same(clean.image, changed.image) or not _same(clean.right, changed.right):
+                return None
+        return positions
+
+    def evaluate(self, value: float) -> Trial:
+        """The trial at ``value``: runs until the vote's lead settles (``VotePolicy.lead``)."""
+        trial = Trial(value=float(value), passed=False)
+        self._extend(trial, confirming=False)
+        return trial
+
+    # -- the Judge of pytest_sal.engine.boundary_search (its trials' info is the Trial) ------------------------------
+    def confirm(self, trial: Trial) -> bool:
+        """More runs of ``trial`` until its verdict leads by ``confirm_lead``; its verdict."""
+        if self.policy.noisy:
+            self._extend(trial, confirming=True)
+        return trial.passed
+
+    def settled(self, trial: Trial) -> bool:
+        """The runs of ``trial`` agree by at least ``lead`` (always, with one run per trial)."""
+        return not self.policy.noisy or abs(trial.passes - trial.fails) >= self.policy.lead
+
+    def _extend(self, trial: Trial, confirming: bool) -> None:
+        start = time.perf_counter()
+        added = False
+        while not trial.runs or self.policy.more(trial.passes, trial.fails, confirming, abstained=trial.abstained):
+            number = len(trial.runs)
+            key = self.key(trial.value, number)
+            if self.cache is None:
+                data, cached = self._run(trial.value, key, number), False
+            else:
+                data, cached = self.cache.compute(key, lambda: self._run(trial.value, key, number), check=run_record_problem, transient=_not_cached)
+            passed = self.requirement.holds(data["metrics"])
+            # a run the machine starved is no evidence that the system failed: it gets no vote
+            run = dict(data["metrics"], passed=passed, abstained=bool(data["metrics"].get("starved")) and not passed, cached=cached)
+            if reason := _not_cached(data):
+                run["not_cached"] = reason
+            trial.runs.append(run)
+            trial.artifacts.update({k: v for k, v in data.get("artifacts", {}).items() if k not in trial.artifacts})
+            added = True
+        if not added:
+            return
+        trial.metrics = aggregate_metrics(trial.runs)
+        trial.passed = trial.passes > trial.fails
+        trial.cached = all(r["cached"] for r in trial.runs)
+        trial.failed = [str(c) for c in self.requirement.failed(trial.metrics)]
+        trial.wall_time_s += time.perf_counter() - start
+        if self.progress is not None:
+            self.progress(trial)
+
+    def _run(self, value: float, key: str, number: int) -> dict[str, Any]:
+        """One run at ``value``: perturb, run the system, score; the first run of a trial also
+        makes the report artifacts."""
+        module = self.ref.module(value)
+        perturbed = perturb(self.dataset, module, seed=self.seed)
+        if self.cache_frames and self.cache is not None:
+            perturbed = cached_sequence(perturbed, self.cache)
+        groundtruth = perturbed.groundtruth
+        folder = self.cache.root / "artifacts" if self.cache is not None and self.artifacts and number == 0 else None
+        load = machine_load()
+        try:
+            result = self.system.run(perturbed, self.workdir / f"{key[:12]}-run{number}", timeout=self.timeout)
+        except MemoryError:
+            states = np.full(len(perturbed), TrackState.NOT_INITIALISED, dtype=np.int8)
+            result = RunResult(
+                system=self.system.name, sequence=perturbed.name, sensor=perturbed.sensor, timestamps=perturbed.timestamps,
+                states=states, failure="out of memory (MemoryError)",
+            )
+        scored = evaluate(result, groundtruth, kitti_segments=self.kitti_segments)
+        metrics = scored.to_dict()
+        for name in TRIAL_METRICS:  # NaN judges like null, and a stored record holds no NaN
+            if metrics[name] is not None and not math.isfinite(metrics[name]):
+                metrics[name] = None
+        metrics["wall_time_s"] = result.wall_time_s
+        metrics["starved"] = result.fell_behind  # the machine could not feed it even re-paced
+        metrics["load"] = result.load
+        artifacts: dict[str, str] = {}
+        if folder is not None:
+            if scored.ate is not None and groundtruth is not None:
+                from pytest_sal.analysis.plots import plot_trajectories
+
+                title = f"{self.system.name} on {perturbed.name}, {self.ref.label} = {value:g} {self.ref.unit}".rstrip()
+                artifacts["trajectory"] = str(plot_trajectories(groundtruth, {self.system.name: scored.ate.estimate}, folder / f"{key}-trajectory.png", title=title))
+            if len(perturbed):
+                artifacts["frame"] = str(_example_frame(perturbed, folder / f"{key}.png"))
+        record = {"value": value, "module": module.to_dict(), "metrics": metrics, "artifacts": artifacts}
+        reason = machine_failure(result, load)
+        return record if reason is None else {**record, "not_cached": reason}
+
+
+def cached_sequence(sequence: Sequence, cache: ContentCache, *, progress: bool = False) -> Sequence:
+    """``sequence`` written once into ``cache`` (keyed by its fingerprint, which for a
+    perturbed sequence covers source, chain, seed and depth provider) and opened from there;
+    ``progress`` shows a bar while it is written."""
+    from sal_adapters import DATASETS, open_dataset, write_sequence
+
+    folder, _ = cache.compute_dir(cache_key(frames=sequence.fingerprint), lambda target: write_sequence(sequence, target, progress=progress))
+    options = {"stereo": True} if sequence.sensor == "stereo" and "stereo" in DATASETS.get(sequence.kind).option_names() else {}
+    reopened = open_dataset(sequence.kind, folder, **options)
+    return reopened.replace(name=sequence.name, meta=dict(reopened.meta, perturbation=sequence.meta.get("perturbation")))
+
+
+def _not_cached(record: dict[str, Any]) -> str | None:
+    """Why a run record must not be stored (``TrialRunner._run`` sets it): the machine decided it."""
+    return record.get("not_cached")
+
+
+def _same(a: np.ndarray | None, b: np.ndarray | None) -> bool:
+    """Equal up to rounding: at most 1 grey level apart, and on fewer than 1 % of the values."""
+    if a is None or b is None:
+        return a is None and b is None
+    if a.shape != b.shape:
+        return False
+    change = cv2.absdiff(a, b)
+    return int(change.max(initial=0)) <= 1 and np.count_nonzero(change) < 0.01 * change.size
+
+
+def _example_frame(sequence: Sequence, path: Path, width: int = 480) -> Path:
+    """The middle frame of ``sequence``, scaled to ``width`` px, as a PNG (for reports)."""
+    from sal_adapters.images import scaled_to_width, write_image
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_image(path, scaled_to_width(sequence[len(sequence) // 2].image, width))
+    return path

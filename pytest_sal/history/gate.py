@@ -1,0 +1,99 @@
+"""The regression gate: an outcome compared with its baseline in the run history.
+
+``--sal-compare=REF`` names the baseline: a run name saved with ``--sal-save=NAME`` (the ini
+``sal_baseline``, ``main`` by default, when no REF is given), a run number, a commit prefix, or
+``last`` (the newest run whose outcome did not fail a gate, so rerunning a regressed commit
+compares with the last good run). A test with nothing to compare against is said so in its
+``comparison``; under ``--sal-compare-missing=fail`` it fails.
+
+Also here: what a pytest argument list gets wrong before plugins load (``space_form_problem``).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+from sal_adapters.errors import SalError
+
+if TYPE_CHECKING:
+    from pytest_sal.history.run_history import History
+    from pytest_sal.engine.outcome import Outcome
+    from pytest_sal.history.regression import RegressionCheck
+
+__all__ = ["MISSING_POLICIES", "NOT_COMPARED", "PATH_OPTIONS", "compare_with_baseline", "space_form_problem"]
+
+#: what a test with no baseline does: ``pass`` (said in its row and the summary) or ``fail``
+MISSING_POLICIES = ("pass", "fail")
+#: how ``Outcome.comparison`` starts when there was nothing to compare with
+NOT_COMPARED = "not compared: "
+#: options whose value is a path: given with a space, pytest takes it for a test path
+PATH_OPTIONS = ("--sal-cache-dir", "--sal-history-dir", "--sal-report-md", "--sal-report-html")
+#: other options that take a value (refused with a space only when the value is an existing path)
+VALUE_OPTIONS = ("--sal-cache-size", "--sal-save", "--sal-compare", "--sal-compare-fail", "--sal-compare-missing")
+
+
+def compare_with_baseline(
+    outcome: Outcome,
+    history: History,
+    ref: str,
+    checks: list[RegressionCheck],
+    *,
+    missing: str = "pass",
+) -> Outcome:
+    """``outcome`` compared with the same test's outcome in the baseline ``ref``: sets
+    ``previous`` (the baseline's boundary), ``comparison`` (what it was compared with, or why
+    not) and ``regression`` (the failed ``checks``; with ``missing="fail"``, also a missing
+    baseline). Returns ``outcome``."""
+    from pytest_sal.history.run_history import outcome_key
+    from pytest_sal.history.regression import regressions
+
+    try:
+        found = history.baseline(outcome_key(outcome), ref)
+        reason = "" if found else f"no outcome of this test ({outcome.system} on {outcome.dataset}) in {_ref_text(ref)} of {history.root}"
+    except SalError as exc:  # ref names no run: a missing baseline (the message lists the runs there)
+        found, reason = None, str(exc)
+    if found is None:
+        outcome.comparison = NOT_COMPARED + reason
+        if missing == "fail":
+            outcome.regression = f"{outcome.comparison} (--sal-compare-missing=fail)"
+        return outcome
+    run, previous = found
+    outcome.previous = previous.boundary
+    where = f"run {run.label}" + (f", commit {run.commit}" if run.commit else "")
+    notes = [f"{run.name or ref} ({where})"]
+    if previous.machine and outcome.machine and previous.machine != outcome.machine:
+        notes.append(f"on another machine: baseline {previous.machine}, this run {outcome.machine}")
+    if previous.system_version and outcome.system_version and previous.system_version != outcome.system_version:
+        notes.append(f"system {previous.system_version} -> {outcome.system_version}")
+    outcome.comparison = "; ".join(notes)
+    found_regressions = regressions(checks, outcome, previous)
+    outcome.regression = "; ".join(found_regressions) if found_regressions else None
+    return outcome
+
+
+def space_form_problem(args: Sequence[str], rootdir: str, inifile: str | None) -> str | None:
+    """Why ``args`` cannot be run as given, or ``None``.
+
+    pytest picks its rootdir and ini file from the arguments that look like existing paths
+    before plugins are loaded, so ``--sal-history-dir /x/history`` written with a space makes
+    ``/x/history`` count as a test path there: the rootdir moves, the project's ini file is not
+    read and node ids change. A path option given with a space is refused every time (a folder
+    that exists only from the second run on would change the outcome between runs); another
+    option only when its value names an existing path.
+    """
+    for option, value in zip(args, args[1:]):
+        is_path_option = option in PATH_OPTIONS
+        if not (is_path_option or (option in VALUE_OPTIONS and not value.startswith("-") and os.path.exists(value))):
+            continue
+        return (
+            f"write {option}={value} with '=': given as two words, pytest takes {value} for a test path while it "
+            f"chooses the rootdir and ini file, before pytest-sal is loaded (rootdir {rootdir}, ini file "
+            f"{inifile or 'none'}), so the project's settings and test ids could change"
+        )
+    return None
+
+
+def _ref_text(ref: str) -> str:
+    return "the runs of the history" if ref == "last" else f"the baseline {ref!r}"

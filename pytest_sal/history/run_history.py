@@ -1,0 +1,418 @@
+"""Run history: one JSON file per test session (the regression checks against it are in
+``pytest_sal.history.regression``).
+
+A run is written by ``History.append_run`` as ``NNNN_<commit>_<UTC time>[_<name>].json`` under
+the history root (default ``.sal/history``)::
+
+    {"version": 1, "created": "2025-05-01T12:00:00+00:00", "commit": "1a2b3c4", "dirty": false,
+     "machine": {"hostname": ..., "platform": ..., "cpu_count": ..., "python": ...},
+     "name": "nightly", "outcomes": [Outcome.to_dict(), ...]}
+
+Writers never collide and readers never see half a file: the run number is reserved by an
+exclusive create of ``.numbers/NNNN`` (retried with the next number on ``FileExistsError``, so
+parallel sessions get distinct numbers and a number is never reused), and the JSON is written to a
+temporary file in the same folder, then moved into place with ``os.replace``.
+
+An outcome is identified across runs by its key ``(test_id, system, dataset)``; ``previous``
+finds the outcome a new one is compared with.
+
+The run history is user-owned: commit ``.sal/history`` to keep the robustness of each commit on
+record, or add it to ``.gitignore`` to keep it per machine.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import platform
+import re
+import subprocess
+import warnings
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from pytest_sal.engine.outcome import Outcome
+from sal_adapters.errors import SalError
+from sal_adapters.textfiles import atomic_write_text
+
+__all__ = [
+    "DEFAULT_ROOT",
+    "FORMAT_VERSION",
+    "History",
+    "OutcomeKey",
+    "RunRecord",
+    "commit_info",
+    "cpu_model",
+    "machine_info",
+    "machine_text",
+    "outcome_key",
+]
+
+#: where runs are kept unless configured otherwise (relative to the working directory)
+DEFAULT_ROOT = Path(".sal/history")
+#: the ``version`` written into every run file
+FORMAT_VERSION = 1
+#: identifies an outcome across runs
+OutcomeKey = tuple[str, str, str]
+
+_RUN_FILE = re.compile(r"^(\d{4,})_.*\.json$")
+_NUMBERS = ".numbers"  # reservations of run numbers, one empty file each
+
+
+def outcome_key(outcome: Outcome) -> OutcomeKey:
+    """``(test_id, system, dataset)``: what makes two outcomes of different runs comparable."""
+    return (outcome.test_id, outcome.system, outcome.dataset)
+
+
+# -- where a run was made ---------------------------------------------------------------------
+
+
+def machine_info() -> dict[str, Any]:
+    """``hostname``, ``platform``, ``machine`` (CPU architecture), ``cpu_model``, ``cpu_count``,
+    ``usable_cpus`` (this process's CPU affinity), ``load_avg`` (1, 5, 15 min run-queue
+    averages now), ``python``."""
+    return {
+        "hostname": platform.node(),
+        "platform": platform.platform(),
+        "machine": platform.machine(),
+        "cpu_model": cpu_model(),
+        "cpu_count": os.cpu_count(),
+        "usable_cpus": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
+        "load_avg": [round(x, 2) for x in os.getloadavg()] if hasattr(os, "getloadavg") else None,
+        "python": f"{platform.python_implementation()} {platform.python_version()}",
+    }
+
+
+def cpu_model() -> str:
+    """The CPU's model name (``/proc/cpuinfo``'s first ``model name``; ``platform.processor()``
+    elsewhere), or ``""``."""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as info:
+            for line in info:
+                key, _, value = line.partition(":")
+                if key.strip() in ("model name", "Model", "cpu model"):
+                    return " ".join(value.split())
+    except OSError:
+        pass
+    return platform.processor() or ""
+
+
+def machine_text(info: dict[str, Any]) -> str:
+    """The machine as results depend on it: ``Intel Xeon Gold 6230 (2 cores)``."""
+    cores = info.get("usable_cpus") or info.get("cpu_count")
+    model = info.get("cpu_model") or info.get("machine") or "unknown CPU"
+    return f"{model} ({cores} cores)" if cores else str(model)
+
+
+def commit_info(cwd: str | Path | None = None) -> tuple[str, bool]:
+    """``(short commit, dirty)`` of the git work tree at ``cwd`` (default: the working directory).
+
+    ``dirty``: tracked files differ from the commit (``git status --porcelain
+    --untracked-files=no``; untracked files, the history itself among them, do not count).
+    Without git, outside a repository, or before the first commit: ``("", False)``, no error.
+    """
+    def git(*args: str) -> str | None:
+        try:
+            done = subprocess.run(["git", *args], cwd=cwd, capture_output=True, text=True, timeout=20, check=False)
+        except (OSError, subprocess.SubprocessError):
+            return None
+        return done.stdout if done.returncode == 0 else None
+
+    commit = git("rev-parse", "--short", "HEAD")
+    if not commit or not commit.strip():
+        return "", False
+    status = git("status", "--porcelain", "--untracked-files=no")
+    return commit.strip(), bool(status and status.strip())
+
+
+# -- the store --------------------------------------------------------------------------------
+
+
+@dataclass
+class RunRecord:
+    """One saved session run.
+
+    Attributes:
+        number: the run number (``label`` is its four-digit form, ``"0003"``).
+        path: the JSON file.
+        created: ISO 8601 UTC time of writing.
+        commit, dirty: the git commit (``""`` when unknown) and whether the tree had changes.
+        machine: ``machine_info()`` (or what the caller gave).
+        name: the run's name (``--sal-save=NAME``), or ``None``.
+        outcomes: the outcomes of the run, in the order given.
+    """
+
+    number: int
+    path: Path
+    created: str
+    commit: str
+    dirty: bool
+    machine: dict[str, Any]
+    name: str | None
+    outcomes: list[Outcome] = field(default_factory=list)
+
+    @property
+    def label(self) -> str:
+        return f"{self.number:04d}"
+
+    def get(self, key: OutcomeKey) -> Outcome | None:
+        """The outcome with ``key`` in this run (the last one, should it appear twice)."""
+        found = None
+        for outcome in self.outcomes:
+            if outcome_key(outcome) == key:
+                found = outcome
+        return found
+
+
+class History:
+    """The runs saved under ``root`` (default ``.sal/history``), oldest first.
+
+    Files are read when first needed and again when the folder's listing changes; a file that is
+    not a readable run is skipped with a warning naming it.
+    """
+
+    def __init__(self, root: str | Path = DEFAULT_ROOT) -> None:
+        self.root = Path(root)
+        self._cache: dict[Path, RunRecord | None] = {}
+
+    def __repr__(self) -> str:
+        return f"History({str(self.root)!r})"
+
+    # writing
+
+    def append_run(
+        self,
+        outcomes: list[Outcome],
+        *,
+        name: str | None = None,
+        commit: str | None = None,
+        dirty: bool | None = None,
+        machine: dict[str, Any] | None = None,
+    ) -> Path:
+        """Save ``outcomes`` as the next run; return its path.
+
+        Args:
+            outcomes: the session's outcomes.
+            name: a name for the run (``previous(..., ref=name)`` finds it); in the file name,
+                characters other than letters, digits, ``.``, ``-`` and ``_`` become ``-``.
+            commit, dirty: default ``commit_info()`` of the working directory.
+            machine: default ``machine_info()``.
+
+        An outcome without ``commit`` or ``machine`` gets the run's (commit, hostname) in the
+        file; the objects passed in are not changed.
+        """
+        if commit is None or dirty is None:
+            found_commit, found_dirty = commit_info()
+            commit = found_commit if commit is None else commit
+            dirty = found_dirty if dirty is None else dirty
+        machine = machine_info() if machine is None else dict(machine)
+        now = datetime.now(UTC)
+        records = []
+        for outcome in outcomes:
+            data = outcome.to_dict()
+            data["commit"] = data.get("commit") or commit
+            data["machine"] = data.get("machine") or str(machine.get("hostname", ""))
+            records.append(data)
+        document = {
+            "version": FORMAT_VERSION,
+            "created": now.isoformat(timespec="seconds"),
+            "commit": commit,
+            "dirty": bool(dirty),
+            "machine": machine,
+            "name": name,
+            "outcomes": records,
+        }
+        text = json.dumps(_json_safe(document), indent=2, allow_nan=False) + "\n"
+        self.root.mkdir(parents=True, exist_ok=True)
+        number = self._reserve_number()
+        stem = f"{number:04d}_{commit or 'nogit'}{'-dirty' if dirty else ''}_{now:%Y%m%dT%H%M%SZ}"
+        path = self.root / (f"{stem}_{_safe_name(name)}.json" if name else f"{stem}.json")
+        atomic_write_text(path, text)
+        return path
+
+    def _reserve_number(self) -> int:
+        """The next free run number, taken by an exclusive create (safe with parallel writers)."""
+        numbers = self.root / _NUMBERS
+        numbers.mkdir(exist_ok=True)
+        taken = [int(m.group(1)) for p in self.root.iterdir() if (m := _RUN_FILE.match(p.name))]
+        taken += [int(p.name) for p in numbers.iterdir() if p.name.isdigit()]
+        number = max(taken, default=0) + 1
+        while True:
+            try:
+                with open(numbers / f"{number:04d}", "x"):
+                    return number
+            except FileExistsError:
+                number += 1
+
+    # reading
+
+    def runs(self) -> list[RunRecord]:
+        """Every readable run, by run number."""
+        if not self.root.is_dir():
+            return []
+        paths = sorted((p for p in self.root.iterdir() if _RUN_FILE.match(p.name)), key=lambda p: (int(p.name.split("_")[0]), p.name))
+        self._cache = {p: self._cache[p] if p in self._cache else _read_run(p) for p in paths}
+        return [run for run in self._cache.values() if run is not None]
+
+    def find_runs(self, ref: str) -> list[RunRecord]:
+        """The runs ``ref`` names, oldest first: ``"last"`` (the newest run), a run number
+        (``"0003"``), else a run name, else a git commit prefix (4 characters or more).
+
+        Raises:
+            SalError: no run matches ``ref``.
+        """
+        runs = self.runs()
+        if ref == "last":
+            found = runs[-1:]
+        else:
+            found = [r for r in runs if ref.isdigit() and int(ref) == r.number]
+            found = found or [r for r in runs if r.name is not None and ref in (r.name, _safe_name(r.name))]
+            found = found or [r for r in runs if r.commit and len(ref) >= 4 and r.commit.startswith(ref.lower())]
+        if not found:
+            known = ", ".join(r.label + (f" ({r.name})" if r.name else "") for r in runs[-8:]) or "none yet"
+            raise SalError(
+                f"no run {ref!r} in the history {self.root}: give 'last', a run number, a run name or a "
+                f"commit prefix (latest runs: {known})"
+            )
+        return found
+
+    def previous(self, outcome_key: OutcomeKey, ref: str | None = None) -> Outcome | None:
+        """The outcome with ``outcome_key`` (``(test_id, system, dataset)``) to compare with:
+        ``baseline(...)``'s outcome, or ``None``."""
+        found = self.baseline(outcome_key, ref)
+        return None if found is None else found[1]
+
+    def baseline(self, outcome_key: OutcomeKey, ref: str | None = None) -> tuple[RunRecord, Outcome] | None:
+        """The run and outcome with ``outcome_key`` to compare with.
+
+        Args:
+            ref: ``None`` or ``"last"``: the newest run holding the key whose outcome did not
+                fail a regression gate (so rerunning a regressed commit compares with the last
+                good run, not with itself); a run number (``"0003"``), a run name or a commit
+                prefix: the newest of the runs it names that holds the key.
+
+        Returns:
+            ``(run, outcome)``, or ``None`` when no (named) run holds the key.
+
+        Raises:
+            SalError: ``ref`` names no run at all (the message lists the latest runs).
+        """
+        last = ref in (None, "last")
+        runs = self.runs() if last else self.find_runs(str(ref))
+        for run in reversed(runs):
+            outcome = run.get(tuple(outcome_key))  # type: ignore[arg-type]
+            if outcome is not None and not (last and outcome.regression):
+                return run, outcome
+        return None
+
+    def prune(self, *, keep: int | None = None, older_than_s: float | None = None, dry_run: bool = False) -> list[RunRecord]:
+        """Remove old runs; return those removed (or, with ``dry_run``, those that would be).
+
+        A run goes when it matches every condition given: it is not among the newest ``keep``
+        runs, and it was written more than ``older_than_s`` seconds ago. Never removed: the
+        newest run of each name (a baseline such as ``main`` survives any prune) and the newest
+        run. Run numbers are never reused: the newest reservation stays.
+        """
+        if keep is None and older_than_s is None:
+            raise SalError("history prune: give --keep N, --older-than AGE (e.g. 30d), or both")
+        runs = self.runs()
+        newest_of_name = {run.name: run for run in runs if run.name}  # the last one wins
+        protected = {run.number for run in [*runs[-1:], *newest_of_name.values()]}
+        now = datetime.now(UTC)
+        doomed = [
+            run
+            for index, run in enumerate(runs)
+            if run.number not in protected
+            and (keep is None or index < len(runs) - keep)
+            and (older_than_s is None or (now - _created(run)).total_seconds() > older_than_s)
+        ]
+        if dry_run:
+            return doomed
+        for run in doomed:  # the newest run (and its reservation) stays, so numbers keep rising
+            run.path.unlink(missing_ok=True)
+            (self.root / _NUMBERS / run.label).unlink(missing_ok=True)
+            self._cache.pop(run.path, None)
+        return doomed
+
+    def trend(self, test_id: str, system: str | None = None, dataset: str | None = None) -> list[tuple[RunRecord, Outcome]]:
+        """``(run, outcome)`` of every run holding ``test_id`` (and ``system`` / ``dataset`` when
+        given), oldest first."""
+        return [
+            (run, outcome)
+            for run in self.runs()
+            for outcome in run.outcomes
+            if outcome.test_id == test_id
+            and (system is None or outcome.system == system)
+            and (dataset is None or outcome.dataset == dataset)
+        ]
+
+    def outcome_keys(self) -> list[OutcomeKey]:
+        """Every outcome key in the history, in the order first seen."""
+        return list(dict.fromkeys(outcome_key(o) for run in self.runs() for o in run.outcomes))
+
+
+def _created(run: RunRecord) -> datetime:
+    """When ``run`` was written (its ``created`` time; the file's mtime when that is unreadable)."""
+    try:
+        created = datetime.fromisoformat(run.created)
+        return created if created.tzinfo else created.replace(tzinfo=UTC)
+    except ValueError:
+        return datetime.fromtimestamp(run.path.stat().st_mtime, UTC)
+
+
+def _read_run(path: Path) -> RunRecord | None:
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+        if data.get("version") != FORMAT_VERSION:
+            raise ValueError(f"format version {data.get('version')!r}, this pytest-sal reads {FORMAT_VERSION}")
+        return RunRecord(
+            number=int(path.name.split("_")[0]),
+            path=path,
+            created=str(data.get("created", "")),
+            commit=str(data.get("commit") or ""),
+            dirty=bool(data.get("dirty", False)),
+            machine=dict(data.get("machine") or {}),
+            name=data.get("name"),
+            outcomes=_readable_outcomes(path, data.get("outcomes", [])),
+        )
+    except (OSError, ValueError, TypeError, KeyError, AttributeError) as exc:
+        warnings.warn(f"{path}: not a readable pytest-sal run, skipped ({exc})", stacklevel=3)
+        return None
+
+
+def _readable_outcomes(path: Path, stored: list[Any]) -> list[Outcome]:
+    """The run's outcomes; one that is not readable (a number edited into text or NaN) is
+    skipped with a warning naming the file, the test and the key, the others are kept."""
+    outcomes = []
+    for number, data in enumerate(stored, 1):
+        try:
+            outcomes.append(Outcome.from_dict(data))
+        except (ValueError, TypeError, KeyError, AttributeError) as exc:
+            test = data.get("test_id", "?") if isinstance(data, dict) else "?"
+            warnings.warn(f"{path}: outcome {number} ({test}) skipped: {exc}", stacklevel=4)
+    return outcomes
+
+
+def _safe_name(name: str) -> str:
+    return re.sub(r"[^A-Za-z0-9._-]+", "-", name).strip("-") or "run"
+
+
+def _json_safe(value: Any) -> Any:
+    """Plain JSON: numpy scalars and arrays as Python values, paths as text, NaN and
+    infinities as ``null`` (a metric that is not a number counts as not available)."""
+    if isinstance(value, dict):
+        return {str(k): _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, bool) or value is None or isinstance(value, (str, int)):
+        return value
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, Path):
+        return str(value)
+    if hasattr(value, "tolist"):  # numpy scalar or array
+        return _json_safe(value.tolist())
+    raise TypeError(f"cannot save {type(value).__name__} {value!r} in the run history")

@@ -1,0 +1,202 @@
+#!/usr/bin/env python3
+"""The import graph of the four packages, checked against their layers.
+
+Reads every ``.py`` file's ``import`` statements with ``ast`` (top level and inside functions,
+``TYPE_CHECKING`` blocks marked as such) and reports:
+
+* an **upward import**: a module importing from a higher layer (``LAYERS`` below, lowest first);
+* a **cycle** among modules (strongly connected components of more than one module, counting
+  imports at every level, ``TYPE_CHECKING`` ones excepted since they never run).
+
+Exit status 1 when either exists, so ``.ci/run`` can hold the line. ``--dot FILE`` writes the
+package-level graph in Graphviz form; ``--modules`` prints every module's imports.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+__all__ = ["LAYERS", "Import", "collect_imports", "layer_of", "find_cycles", "main"]
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("sal_adapters", "sal_modules", "sal_wrappers", "pytest_sal")
+
+#: Layers, lowest first: a module may import from its own layer or any lower one. Matched by
+#: the longest dotted prefix.
+LAYERS: list[tuple[str, ...]] = [
+    ("sal_adapters",),  # datasets, sequences, trajectories, shared errors and file helpers
+    ("sal_modules", "sal_wrappers"),  # perturbations; SLAM systems
+    ("pytest_sal.analysis",),  # pure algorithms: metrics, KITTI metrics, feature tracking, plots
+    ("pytest_sal.store",),  # the content-addressed trial cache and its keys
+    ("pytest_sal.engine",),  # requirements, boundary search, trials, outcomes
+    ("pytest_sal.history",),  # run history, regression checks, the gate
+    ("pytest_sal.experiment",),  # YAML experiments as library functions
+    ("pytest_sal.report",),  # terminal, Markdown, HTML, experiment page, formatting
+    ("pytest_sal.cli",),  # the sal command: argparse and printing
+    ("pytest_sal",),  # the plugin surface: plugin, session, api, testing, progress
+]
+
+
+class Import:
+    """One ``import`` statement: who imports what, at which line, and how."""
+
+    def __init__(self, source: str, target: str, line: int, in_function: bool, type_checking: bool) -> None:
+        self.source, self.target, self.line = source, target, line
+        self.in_function, self.type_checking = in_function, type_checking
+
+    def __repr__(self) -> str:
+        where = " (in a function)" if self.in_function else ""
+        where += " (TYPE_CHECKING)" if self.type_checking else ""
+        return f"{self.source} -> {self.target} line {self.line}{where}"
+
+
+def module_name(path: Path) -> str:
+    """``pytest_sal/engine/search.py`` -> ``pytest_sal.engine.search``."""
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def all_modules() -> dict[str, Path]:
+    """Every module of the four packages by dotted name."""
+    return {module_name(p): p for package in PACKAGES for p in sorted((ROOT / package).rglob("*.py"))}
+
+
+def resolve(target: str, modules: dict[str, Path]) -> str | None:
+    """The longest known module that ``target`` names (``a.b.name`` -> ``a.b``)."""
+    while target:
+        if target in modules:
+            return target
+        target = target.rpartition(".")[0]
+    return None
+
+
+def collect_imports(modules: dict[str, Path]) -> list[Import]:
+    """Every import between known modules, with its line and context."""
+    found: list[Import] = []
+    for name, path in modules.items():
+        tree = ast.parse(path.read_text(), str(path))
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        _visit(tree, name, package, modules, found, in_function=False, type_checking=False)
+    return found
+
+
+def _visit(node: ast.AST, source: str, package: str, modules: dict[str, Path], found: list[Import], in_function: bool, type_checking: bool) -> None:
+    for child in ast.iter_child_nodes(node):
+        if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            _visit(child, source, package, modules, found, True, type_checking)
+            continue
+        if isinstance(child, ast.If) and "TYPE_CHECKING" in ast.unparse(child.test):
+            _visit(child, source, package, modules, found, in_function, True)
+            for other in child.orelse:
+                _visit(other, source, package, modules, found, in_function, type_checking)
+            continue
+        targets: list[str] = []
+        if isinstance(child, ast.Import):
+            targets = [alias.name for alias in child.names]
+        elif isinstance(child, ast.ImportFrom):
+            base = child.module or ""
+            if child.level:
+                anchor = package.split(".")
+                anchor = anchor[: len(anchor) - (child.level - 1)]
+                base = ".".join(anchor + ([base] if base else []))
+            targets = [f"{base}.{alias.name}" for alias in child.names] or [base]
+        for target in targets:
+            resolved = resolve(target, modules)
+            if resolved and resolved != source:
+                found.append(Import(source, resolved, child.lineno, in_function, type_checking))
+        _visit(child, source, package, modules, found, in_function, type_checking)
+
+
+def layer_of(module: str) -> int:
+    """Index in ``LAYERS`` of the longest prefix naming ``module``."""
+    best, best_len = -1, -1
+    for index, prefixes in enumerate(LAYERS):
+        for prefix in prefixes:
+            if (module == prefix or module.startswith(prefix + ".")) and len(prefix) > best_len:
+                best, best_len = index, len(prefix)
+    return best
+
+
+def find_cycles(imports: list[Import]) -> list[list[str]]:
+    """Strongly connected components of more than one module (Tarjan), ``TYPE_CHECKING`` left out.
+    A package's ``__init__`` re-exporting its own submodules is not a cycle edge."""
+    graph: dict[str, set[str]] = defaultdict(set)
+    for imp in imports:
+        if imp.type_checking or imp.target.startswith(imp.source + "."):
+            continue
+        graph[imp.source].add(imp.target)
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    components: list[list[str]] = []
+
+    def strongconnect(node: str) -> None:
+        index[node] = low[node] = len(index)
+        stack.append(node)
+        on_stack.add(node)
+        for nxt in graph.get(node, ()):
+            if nxt not in index:
+                strongconnect(nxt)
+                low[node] = min(low[node], low[nxt])
+            elif nxt in on_stack:
+                low[node] = min(low[node], index[nxt])
+        if low[node] == index[node]:
+            component = []
+            while True:
+                member = stack.pop()
+                on_stack.discard(member)
+                component.append(member)
+                if member == node:
+                    break
+            if len(component) > 1:
+                components.append(sorted(component))
+
+    sys.setrecursionlimit(10000)
+    for node in list(graph):
+        if node not in index:
+            strongconnect(node)
+    return components
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--dot", type=Path, help="write the package-level graph to this Graphviz file")
+    parser.add_argument("--modules", action="store_true", help="print every module's imports")
+    args = parser.parse_args(argv)
+    modules = all_modules()
+    imports = collect_imports(modules)
+    upward = [imp for imp in imports if not imp.type_checking and layer_of(imp.target) > layer_of(imp.source)]
+    cycles = find_cycles(imports)
+    if args.modules:
+        for imp in sorted(imports, key=lambda i: (i.source, i.line)):
+            print(imp)
+    if args.dot:
+        edges = {(_package(i.source), _package(i.target)) for i in imports if _package(i.source) != _package(i.target)}
+        lines = ["digraph imports {", "  rankdir=BT;"] + [f'  "{a}" -> "{b}";' for a, b in sorted(edges)] + ["}"]
+        args.dot.write_text("\n".join(lines) + "\n")
+    function_level = sum(imp.in_function for imp in imports)
+    print(f"{len(modules)} modules, {len(imports)} imports between them ({function_level} inside functions)")
+    for imp in upward:
+        print(f"upward import: {imp}  (layer {layer_of(imp.source)} imports layer {layer_of(imp.target)})")
+    for cycle in cycles:
+        print(f"cycle: {' <-> '.join(cycle)}")
+    if not upward and not cycles:
+        print("no upward import, no cycle")
+    return 1 if upward or cycles else 0
+
+
+def _package(module: str) -> str:
+    """The subpackage a module belongs to, for the package-level graph."""
+    parts = module.split(".")
+    return ".".join(parts[:2]) if parts[0] == "pytest_sal" and len(parts) > 2 else parts[0] if parts[0] != "pytest_sal" else module
+
+
+if __name__ == "__main__":
+    sys.exit(main())
