@@ -293,7 +293,7 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
 
 def _trace(outcome: Any) -> str:
     """The report section of a robustness test: requirement, boundary, votes, a line per trial."""
-    from pytest_sal.progress import trial_line
+    from pytest_sal.report.formatting import trial_line
     from pytest_sal.report.outcome_report import trial_metric_names
 
     lines = [f"{outcome.requirement}; boundary {outcome.boundary.text()} ({outcome.termination})"]

@@ -23,21 +23,9 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from pytest_sal.engine.outcome import Trial
-from pytest_sal.report.outcome_report import metric_text, short_id
+from pytest_sal.report.formatting import short_id, trial_line
 
-__all__ = ["trial_line", "trial_printer"]
-
-
-def trial_line(trial: Trial, parameter: str, unit: str, metrics: Sequence[str]) -> str:
-    """One trial as text: ``fog.visibility_m = 25 m: pass  tracking_rate 0.65, ate_rmse 0.0123 m
-    0.4 s (cached)``: the value with its unit, the verdict (``FAIL`` in capitals; the runs'
-    votes when more than one ran), the median ``metrics`` named (with their units), the
-    seconds spent on the trial (``Trial.wall_time_s``) and ``(cached)`` when no run was made."""
-    votes = f" ({trial.votes()})" if len(trial.runs) > 1 else ""
-    shown = ", ".join(f"{name} {metric_text(name, trial.metrics.get(name))}" for name in metrics)
-    value = f"{trial.value:g}{' ' + unit if unit else ''}"
-    cached = " (cached)" if trial.cached else ""
-    return f"{parameter} = {value}: {'pass' if trial.passed else 'FAIL'}{votes}  {shown}  {trial.wall_time_s:.1f} s{cached}"
+__all__ = ["trial_printer"]
 
 
 def trial_printer(config: Any, test_id: str, parameter: str, unit: str, metrics: Sequence[str]) -> Callable[[Trial], None] | None:

@@ -18,7 +18,7 @@ import pytest
 from plugin_suites import HEADER, SMALL_DATASET, outcomes, output, run
 
 from pytest_sal.engine.outcome import Trial
-from pytest_sal.progress import trial_line
+from pytest_sal.report.formatting import trial_line
 
 CONFTEST = '''
 import json

@@ -11,11 +11,11 @@ import pytest
 from browser import find_picture, needs_chromium, screenshot
 
 from pytest_sal.engine.outcome import Boundary, Outcome, Trial
+from pytest_sal.report.formatting import short_id
 from pytest_sal.report.outcome_report import (
     headline,
     markdown_report,
     metric_plot,
-    short_id,
     summary_rows,
     terminal_table,
     write_html_report,

@@ -25,22 +25,17 @@ from matplotlib.transforms import blended_transform_factory
 
 from pytest_sal.engine.outcome import Outcome, Trial, failures_first
 from pytest_sal.analysis.plots import DPI, FIGSIZE, save_png
+from pytest_sal.report.formatting import metric_text, num, short_id, signed, truncate_left, with_unit
 from pytest_sal.report.outcome_report import (
     boundary_cell,
     change_cell,
     envelope_text,
     headline,
-    metric_text,
-    num,
-    short_id,
-    signed,
     status,
     summary_rows,
     table_columns,
-    trial_verdict,
     trial_metric_names,
-    truncate_left,
-    with_unit,
+    trial_verdict,
 )
 from pytest_sal.engine.requirements import METRICS
 from sal_adapters.atomic import Replacement, copy_file

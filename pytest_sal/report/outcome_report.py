@@ -16,15 +16,13 @@ the system copes with more than the requirement asks (margin) or than it did bef
 
 from __future__ import annotations
 
-import math
 import re
 from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import Any
 
 from pytest_sal.history.gate import NOT_COMPARED
 from pytest_sal.engine.outcome import Boundary, Outcome, Trial, failures_first
-from pytest_sal.engine.requirements import METRICS
+from pytest_sal.report.formatting import metric_text, num, short_id, signed, truncate_left, truncate_right, with_unit
 from sal_adapters.textfiles import atomic_write_text
 
 __all__ = [
@@ -72,7 +70,6 @@ _DROP_ORDER = ("confidence", "system", "change", "requirement", "parameter")
 #: Columns whose end says most (test ids, ``(night>>fog).visibility_m``) lose their left end.
 _LEFT_TRUNCATED = ("test", "parameter")
 _SEP = "  "
-ELLIPSIS = "…"
 #: Metrics shown in the trials tables, in order (others go to the details only through criteria).
 SHOWN_METRICS = ("ate_rmse", "tracking_rate")
 _VERDICT_TEXT = {"passed": "passed", "failed": "FAILED", "flaky": "FLAKY", "regressed": "FAILED"}
@@ -84,46 +81,6 @@ _VERDICT_TEXT = {"passed": "passed", "failed": "FAILED", "flaky": "FLAKY", "regr
 def status(outcome: Outcome) -> str:
     """``passed``, ``failed``, ``flaky`` or ``regressed`` (a regression outranks the verdict)."""
     return "regressed" if outcome.regression is not None else outcome.verdict
-
-
-def short_id(test_id: str) -> str:
-    """The node id without the test file's folders: ``test_fog.py::test_visibility[orbslam3]``."""
-    path, sep, rest = test_id.partition("::")
-    return path.rsplit("/", 1)[-1] + sep + rest
-
-
-def truncate_left(text: str, width: int) -> str:
-    return text if len(text) <= width else ELLIPSIS + text[len(text) - width + 1 :] if width > 1 else text[-width:]
-
-
-def truncate_right(text: str, width: int) -> str:
-    return text if len(text) <= width else text[: width - 1] + ELLIPSIS if width > 1 else text[:width]
-
-
-def num(value: float | None) -> str:
-    return "-" if value is None else f"{value:.4g}"
-
-
-def with_unit(value: float | None, unit: str) -> str:
-    return "-" if value is None else f"{value:.4g}{' ' + unit if unit else ''}"
-
-
-def signed(value: float | None, unit: str) -> str:
-    """``+1.2 m``, ``-3 %``, ``±0 m``; ``-`` when unknown."""
-    if value is None:
-        return "-"
-    text = "±0" if abs(value) < 1e-12 else f"{value:+.3g}"
-    return f"{text} {unit}" if unit else text
-
-
-def metric_text(name: str, value: Any) -> str:
-    """A metric value with its unit (``0.412 m``); ``-`` when missing."""
-    if value is None or (isinstance(value, float) and not math.isfinite(value)):
-        return "-"
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        return str(value)
-    unit = METRICS[name].unit if name in METRICS else ""
-    return f"{value:.3g}{' ' + unit if unit else ''}"
 
 
 def envelope_text(outcome: Outcome) -> str:
