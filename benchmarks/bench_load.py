@@ -76,7 +76,9 @@ def main() -> None:
         helper = subprocess.Popen([sys.executable, str(OVERSUBSCRIBE), str(args.load)])
         time.sleep(args.warmup)
     try:
-        print("| run | tracked | 1st attempt fell behind (late frames, max lateness, overrun) | attempts | paces | fell_behind | load avg start/end | wall s (all attempts) |")
+        print(
+            "| run | tracked | 1st attempt fell behind (late frames, max lateness, overrun) | attempts | paces | fell_behind | load avg start/end | wall s (all attempts) |"
+        )
         print("|---|---:|---|---:|---|---|---|---:|")
         for number in range(1, args.runs + 1):
             with tempfile.TemporaryDirectory() as work:

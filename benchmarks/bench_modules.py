@@ -31,6 +31,7 @@ from typing import Any  # noqa: E402
 
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
+from results_file import write_section  # noqa: E402  (benchmarks/ is on sys.path when run as a script)
 
 from sal_adapters import FrameRecord, Sequence, open_dataset  # noqa: E402
 from sal_modules import (  # noqa: E402
@@ -40,8 +41,6 @@ from sal_modules import (  # noqa: E402
     create,
 )
 from sal_modules.depth import NativeDepth, StereoDepth  # noqa: E402
-
-from results_file import write_section  # noqa: E402  (benchmarks/ is on sys.path when run as a script)
 
 #: Moderate settings of our modules (the work per frame, not the look, matters here).
 SETTINGS: dict[str, dict[str, Any]] = {
@@ -171,7 +170,9 @@ def time_module(label: str, sequence: Sequence, repeats: int) -> tuple[float, fl
     else:
         for index, image, depth_map in frames[:3]:  # warm-up: buffers, tables, page faults
             module.apply(image, depth_map, index, "right")
-        per_frame = median_ms(lambda k: module.apply(frames[k % len(frames)][1], frames[k % len(frames)][2], frames[k % len(frames)][0], "right"), repeats)
+        per_frame = median_ms(
+            lambda k: module.apply(frames[k % len(frames)][1], frames[k % len(frames)][2], frames[k % len(frames)][0], "right"), repeats
+        )
     module.cleanup()
     return setup_ms, per_frame
 
@@ -198,14 +199,18 @@ def table(repeats: int, frames: int) -> str:
         if label.split(" ")[0] not in available:
             continue
         ours = {size: time_module(label, seq, repeats) for size, seq in sizes.items()}
-        lines.append(f"| {label} | **pytest-sal** | **{ours['1241x376'][1]:.1f}** | **{ours['640x480'][1]:.1f}** | {ours['1241x376'][0]:.0f} |")
+        lines.append(
+            f"| {label} | **pytest-sal** | **{ours['1241x376'][1]:.1f}** | **{ours['640x480'][1]:.1f}** | {ours['1241x376'][0]:.0f} |"
+        )
         for peer, factory in PEERS.get(label, []):
             cells = [time_peer(factory, seq, repeats) for seq in sizes.values()]
             shown = [f"{c:.1f}" if isinstance(c, float) else c for c in cells]
             lines.append(f"| {label} | {peer} | {shown[0]} | {shown[1]} | |")
         print(lines[-1], flush=True)
     lines += ["", "| depth provider | 1241x376 ms/frame | 640x480 ms/frame |", "|---|---:|---:|"]
-    stereo = [median_ms(lambda k, seq=seq: StereoDepth().compute(seq, k % len(seq), "left"), max(3, repeats // 4)) for seq in sizes.values()]
+    stereo = [
+        median_ms(lambda k, seq=seq: StereoDepth().compute(seq, k % len(seq), "left"), max(3, repeats // 4)) for seq in sizes.values()
+    ]
     lines.append(f"| stereo SGBM (3-way, hole filling), per stream | {stereo[0]:.1f} | {stereo[1]:.1f} |")
     return "\n".join(lines)
 
@@ -215,7 +220,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=20, help="timed calls per contender and size (default 20)")
     parser.add_argument("--frames", type=int, default=12, help="distinct frames cycled through (default 12)")
-    parser.add_argument("--rounds", type=int, default=ROUNDS, help=f"rounds per contender and size; the best round's median is reported (default {ROUNDS})")
+    parser.add_argument(
+        "--rounds", type=int, default=ROUNDS, help=f"rounds per contender and size; the best round's median is reported (default {ROUNDS})"
+    )
     parser.add_argument("--write", action="store_true", help="replace the module section of benchmarks/RESULTS.md")
     args = parser.parse_args()
     cv2.setNumThreads(1)

@@ -89,7 +89,10 @@ def summary(values: list[float]) -> str:
 def table(trees: dict[str, Path], times: dict[tuple[str, str], list[tuple[float, float]]]) -> str:
     """Markdown: one row per command plus the plugin's paired cost; wall, then CPU, per tree."""
     columns = [(clock, k, name) for k, clock in enumerate(("wall", "CPU")) for name in trees]
-    lines = ["| ms, median (p25-p75) | " + " | ".join(f"{name} {clock}" for clock, _, name in columns) + " |", "|---|" + "---:|" * len(columns)]
+    lines = [
+        "| ms, median (p25-p75) | " + " | ".join(f"{name} {clock}" for clock, _, name in columns) + " |",
+        "|---|" + "---:|" * len(columns),
+    ]
     for label in COMMANDS:
         lines.append(f"| `{label}` | " + " | ".join(summary([t[k] for t in times[(name, label)]]) for _, k, name in columns) + " |")
     with_plugin, without = PLUGIN_COST

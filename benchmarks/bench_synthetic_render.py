@@ -52,7 +52,9 @@ def main() -> None:
         both = median_ms(lambda i, world=world: (world.render(i), world.render(i, right=True)), timed)
         rows.append((scene, f"{width}x{height}", "left + depth", left))
         rows.append((scene, f"{width}x{height}", "left + right + depth", both))
-    print(f"Python {platform.python_version()}, numpy {np.__version__}, OpenCV {cv2.__version__}, {platform.machine()}, 1 thread, median of {args.frames} frames\n")
+    print(
+        f"Python {platform.python_version()}, numpy {np.__version__}, OpenCV {cv2.__version__}, {platform.machine()}, 1 thread, median of {args.frames} frames\n"
+    )
     print("| scene | size (px) | output | ms / frame | frames / s |")
     print("|---|---|---|---:|---:|")
     for scene, size, output, ms in rows:

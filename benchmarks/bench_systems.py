@@ -35,14 +35,13 @@ from typing import Any
 
 import cv2
 import numpy as np
+from results_file import write_section  # benchmarks/ is on sys.path when run as a script
 
 from pytest_sal.analysis.metrics import evaluate
 from sal_adapters import open_dataset
 from sal_modules import create as create_module
 from sal_modules import perturb
 from sal_wrappers import create
-
-from results_file import write_section  # benchmarks/ is on sys.path when run as a script
 
 #: (label, dataset options) of the synthetic world.
 WORLDS: list[tuple[str, dict[str, Any]]] = [

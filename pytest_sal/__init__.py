@@ -52,8 +52,21 @@ __all__ = [
 
 __version__ = "0.1.0"
 
-__getattr__, __dir__ = lazy_exports(__name__, {
-    "pytest_sal.api": ["at", "dataset_fixture", "require", "sweep"],
-    "pytest_sal.engine.requirements": ["InvalidRequirement", "Metric", "ate_rmse", "r_rel", "rpe_rot", "rpe_trans", "scale_error", "t_rel", "tracking_rate"],
-    "sal_adapters.errors": ["SalError"],
-})
+__getattr__, __dir__ = lazy_exports(
+    __name__,
+    {
+        "pytest_sal.api": ["at", "dataset_fixture", "require", "sweep"],
+        "pytest_sal.engine.requirements": [
+            "InvalidRequirement",
+            "Metric",
+            "ate_rmse",
+            "r_rel",
+            "rpe_rot",
+            "rpe_trans",
+            "scale_error",
+            "t_rel",
+            "tracking_rate",
+        ],
+        "sal_adapters.errors": ["SalError"],
+    },
+)

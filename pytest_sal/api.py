@@ -46,7 +46,11 @@ def require(
     default: ini ``sal_tolerance`` percent of the edge) in at most ``max_trials`` trials of
     ``runs`` runs each. Without an envelope, use it with ``sal.sweep`` or ``sal.at``.
     """
-    options = {k: v for k, v in {"tolerance": tolerance, "max_trials": max_trials, "runs": runs, "search_range": search_range, "seed": seed}.items() if v is not None}
+    options = {
+        k: v
+        for k, v in {"tolerance": tolerance, "max_trials": max_trials, "runs": runs, "search_range": search_range, "seed": seed}.items()
+        if v is not None
+    }
     requirement = Requirement.build(criteria_and_envelope, **options)
 
     def decorate(function: F) -> F:
@@ -87,12 +91,16 @@ def at(param: Any = None, value: float | None = None, **by_address: float) -> Ca
     always run, like hypothesis' ``@example``."""
     if param is None:
         if len(by_address) != 1:
-            raise InvalidRequirement('sal.at() takes one parameter and value: sal.at(fog.visibility_m, 30) or sal.at(**{"fog.visibility_m": 30})')
+            raise InvalidRequirement(
+                'sal.at() takes one parameter and value: sal.at(fog.visibility_m, 30) or sal.at(**{"fog.visibility_m": 30})'
+            )
         ((address, value),) = by_address.items()
         param = _resolve(address)
     ref = _ref(param, "sal.at")
     if value is None:
-        raise InvalidRequirement(f"sal.at({ref.label}) needs a value in {ref.unit or 'its unit'}, e.g. sal.at({ref.label}, {ref.param.default!r})")
+        raise InvalidRequirement(
+            f"sal.at({ref.label}) needs a value in {ref.unit or 'its unit'}, e.g. sal.at({ref.label}, {ref.param.default!r})"
+        )
     _check_value(ref, value, "sal.at")
 
     def decorate(function: F) -> F:

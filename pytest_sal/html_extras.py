@@ -41,18 +41,22 @@ def outcome_html(outcome: Any) -> str:
     the boundary's ends (``Trial.artifacts["frame"]``, when the trial made one), as
     ``<img src="data:image/png;base64,...">``."""
     from pytest_sal.analysis.plots import png_bytes
-    from pytest_sal.report.outcome_report import trial_verdict
     from pytest_sal.report.formatting import with_unit
     from pytest_sal.report.html import esc, metric_figure
+    from pytest_sal.report.outcome_report import trial_verdict
 
-    parts = [f"<p><b>{esc(outcome.parameter)}</b> boundary {esc(outcome.boundary.text())} ({esc(outcome.termination)}); {esc(outcome.requirement)}</p>"]
+    parts = [
+        f"<p><b>{esc(outcome.parameter)}</b> boundary {esc(outcome.boundary.text())} ({esc(outcome.termination)}); {esc(outcome.requirement)}</p>"
+    ]
     if outcome.trials:
         parts.append(_img(png_bytes(metric_figure(outcome)), esc(f"{outcome.parameter} against the metrics")))
     for label, trial in zip(("last pass", "first fail"), outcome.end_trials()):
         if trial is None or not Path(trial.artifacts.get("frame") or "").is_file():
             continue
         caption = esc(f"{label}: {with_unit(trial.value, outcome.boundary.unit)} ({trial_verdict(trial)})")
-        parts.append(f"<figure>{_img(Path(trial.artifacts['frame']).read_bytes(), f'frame at {caption}')}<figcaption>{caption}</figcaption></figure>")
+        parts.append(
+            f"<figure>{_img(Path(trial.artifacts['frame']).read_bytes(), f'frame at {caption}')}<figcaption>{caption}</figcaption></figure>"
+        )
     return "<div class='sal'>" + "".join(parts) + "</div>"
 
 

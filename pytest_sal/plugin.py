@@ -19,6 +19,7 @@ from pytest_sal.session import SAL_SESSION, SalSession, add_options, outcome_of
 
 __all__ = [
     "PendingSearch",
+    "level_id",
     "pytest_addoption",
     "pytest_collection_modifyitems",
     "pytest_configure",
@@ -30,7 +31,6 @@ __all__ = [
     "pytest_runtest_setup",
     "pytest_sessionfinish",
     "pytest_terminal_summary",
-    "level_id",
     "sal_dataset",
     "sal_level",
     "sal_outcome",
@@ -88,7 +88,9 @@ def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
         return
     ref, named = levels
     if "sal_trial" not in metafunc.fixturenames:
-        raise pytest.UsageError(f"{metafunc.function.__name__}: sal.sweep / sal.at tests take the sal_trial fixture (def {metafunc.function.__name__}(sal_trial): ...)")
+        raise pytest.UsageError(
+            f"{metafunc.function.__name__}: sal.sweep / sal.at tests take the sal_trial fixture (def {metafunc.function.__name__}(sal_trial): ...)"
+        )
     values = [(ref, name, value) for name, value in named.items()]
     metafunc.parametrize("sal_level", values, ids=[level_id(*value) for value in values], indirect=True)
 
@@ -185,7 +187,9 @@ def sal_outcome(request: pytest.FixtureRequest, sal_dataset: Any, sal_system: An
 
 
 @pytest.fixture
-def sal_trial(request: pytest.FixtureRequest, sal_level: Any, sal_dataset: Any, sal_system: Any, sal_runs: int | None, tmp_path: Path) -> Any:
+def sal_trial(
+    request: pytest.FixtureRequest, sal_level: Any, sal_dataset: Any, sal_system: Any, sal_runs: int | None, tmp_path: Path
+) -> Any:
     """The ``Trial`` at this item's ``sal.sweep`` level or ``sal.at`` point: ``metrics``
     (ate_rmse, tracking_rate, ...), ``passed``, ``runs``. Run in the call phase like
     ``sal_outcome``; a level that misses the requirement fails the test before its body runs."""
@@ -208,7 +212,9 @@ class PendingSearch:
         return session.single(self.item, ref, value, self.dataset, self.system, self.runs, self.workdir)
 
     def __getattr__(self, name: str) -> Any:
-        raise AttributeError(f"{name!r}: the search has not run yet; pytest-sal runs it in the test's call phase, so read sal_outcome / sal_trial in the test body, not in a fixture")
+        raise AttributeError(
+            f"{name!r}: the search has not run yet; pytest-sal runs it in the test's call phase, so read sal_outcome / sal_trial in the test body, not in a fixture"
+        )
 
 
 def _ref_of(request: pytest.FixtureRequest) -> Any:

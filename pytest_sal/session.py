@@ -91,7 +91,9 @@ def _ini_segments(config: pytest.Config) -> tuple[float, ...]:
     try:
         return parse_segments(text)
     except SalError:
-        raise pytest.UsageError(f"pytest-sal: ini option sal_kitti_segments = {text!r}: expected lengths > 0 (m) separated by commas, e.g. 10,20,30,40") from None
+        raise pytest.UsageError(
+            f"pytest-sal: ini option sal_kitti_segments = {text!r}: expected lengths > 0 (m) separated by commas, e.g. 10,20,30,40"
+        ) from None
 
 
 def _ini_size(text: str) -> int:
@@ -106,35 +108,100 @@ def _ini_size(text: str) -> int:
 def add_options(parser: pytest.Parser) -> None:
     """Every option of the plugin: ``--sal-*`` in one group, persistent ones mirrored in ini."""
     group = parser.getgroup("sal", "SLAM robustness (pytest-sal)")
-    group.addoption("--sal-cache-dir", dest="sal_cache_dir", metavar="DIR", default=None,
-                    help="trial cache folder (ini sal_cache_dir). Default: .sal/cache under the rootdir")
-    group.addoption("--sal-cache-size", dest="sal_cache_size", metavar="SIZE", type=_size, default=None,
-                    help="evict least-recently-used cache entries above SIZE (e.g. 5GB; ini sal_cache_size). Default: no limit")
-    group.addoption("--sal-no-cache", dest="sal_no_cache", action="store_true", default=False,
-                    help="run every trial, reading and writing no cache. Default: %(default)r")
-    group.addoption("--sal-cache-frames", dest="sal_cache_frames", action="store_true", default=False,
-                    help="also store each perturbed sequence in the cache (dataset layout) and run systems on the copy: "
-                    "perturb once for several systems or sessions. Default: %(default)r")
-    group.addoption("--sal-history-dir", dest="sal_history_dir", metavar="DIR", default=None,
-                    help="history store (ini sal_history_dir). Default: .sal/history under the rootdir")
-    group.addoption("--sal-no-history", dest="sal_no_history", action="store_true", default=False,
-                    help="do not append this run's boundaries to the history. Default: %(default)r")
-    group.addoption("--sal-save", dest="sal_save", metavar="NAME", default=None,
-                    help="name this run in the history, e.g. --sal-save=main on the main branch; a run in which a "
-                    "--sal-compare-fail check failed is saved without the name, so it cannot become the baseline")
-    group.addoption("--sal-compare", dest="sal_compare", metavar="REF", nargs="?", const="", default=None,
-                    help="compare each boundary with a baseline in the history: a run name (default: ini sal_baseline, "
-                    "'main'), a run number, a commit prefix, or 'last' (the newest run that did not fail the gate)")
-    group.addoption("--sal-compare-missing", dest="sal_compare_missing", choices=("pass", "fail"), default=None,
-                    help="a test the baseline lacks (or no baseline at all): pass, said in the summary, or fail "
-                    "(ini sal_compare_missing). Default: pass")
-    group.addoption("--sal-compare-fail", dest="sal_compare_fail", metavar="CHECK", action="append", type=_compare_fail, default=[],
-                    help="fail a test whose result regressed against --sal-compare: boundary:10%% (relative), boundary:2.5 "
-                    "(in the parameter's unit), ate_rmse:0.2 or ate_rmse:15%% at the edge. Repeatable")
-    group.addoption("--sal-report-md", dest="sal_report_md", metavar="FILE", default=None,
-                    help="write a Markdown summary (for a CI job summary) to FILE")
-    group.addoption("--sal-report-html", dest="sal_report_html", metavar="DIR", default=None,
-                    help="write an HTML report with example frames and plots to DIR/index.html")
+    group.addoption(
+        "--sal-cache-dir",
+        dest="sal_cache_dir",
+        metavar="DIR",
+        default=None,
+        help="trial cache folder (ini sal_cache_dir). Default: .sal/cache under the rootdir",
+    )
+    group.addoption(
+        "--sal-cache-size",
+        dest="sal_cache_size",
+        metavar="SIZE",
+        type=_size,
+        default=None,
+        help="evict least-recently-used cache entries above SIZE (e.g. 5GB; ini sal_cache_size). Default: no limit",
+    )
+    group.addoption(
+        "--sal-no-cache",
+        dest="sal_no_cache",
+        action="store_true",
+        default=False,
+        help="run every trial, reading and writing no cache. Default: %(default)r",
+    )
+    group.addoption(
+        "--sal-cache-frames",
+        dest="sal_cache_frames",
+        action="store_true",
+        default=False,
+        help="also store each perturbed sequence in the cache (dataset layout) and run systems on the copy: "
+        "perturb once for several systems or sessions. Default: %(default)r",
+    )
+    group.addoption(
+        "--sal-history-dir",
+        dest="sal_history_dir",
+        metavar="DIR",
+        default=None,
+        help="history store (ini sal_history_dir). Default: .sal/history under the rootdir",
+    )
+    group.addoption(
+        "--sal-no-history",
+        dest="sal_no_history",
+        action="store_true",
+        default=False,
+        help="do not append this run's boundaries to the history. Default: %(default)r",
+    )
+    group.addoption(
+        "--sal-save",
+        dest="sal_save",
+        metavar="NAME",
+        default=None,
+        help="name this run in the history, e.g. --sal-save=main on the main branch; a run in which a "
+        "--sal-compare-fail check failed is saved without the name, so it cannot become the baseline",
+    )
+    group.addoption(
+        "--sal-compare",
+        dest="sal_compare",
+        metavar="REF",
+        nargs="?",
+        const="",
+        default=None,
+        help="compare each boundary with a baseline in the history: a run name (default: ini sal_baseline, "
+        "'main'), a run number, a commit prefix, or 'last' (the newest run that did not fail the gate)",
+    )
+    group.addoption(
+        "--sal-compare-missing",
+        dest="sal_compare_missing",
+        choices=("pass", "fail"),
+        default=None,
+        help="a test the baseline lacks (or no baseline at all): pass, said in the summary, or fail "
+        "(ini sal_compare_missing). Default: pass",
+    )
+    group.addoption(
+        "--sal-compare-fail",
+        dest="sal_compare_fail",
+        metavar="CHECK",
+        action="append",
+        type=_compare_fail,
+        default=[],
+        help="fail a test whose result regressed against --sal-compare: boundary:10%% (relative), boundary:2.5 "
+        "(in the parameter's unit), ate_rmse:0.2 or ate_rmse:15%% at the edge. Repeatable",
+    )
+    group.addoption(
+        "--sal-report-md",
+        dest="sal_report_md",
+        metavar="FILE",
+        default=None,
+        help="write a Markdown summary (for a CI job summary) to FILE",
+    )
+    group.addoption(
+        "--sal-report-html",
+        dest="sal_report_html",
+        metavar="DIR",
+        default=None,
+        help="write an HTML report with example frames and plots to DIR/index.html",
+    )
     parser.addini("sal_cache_dir", "trial cache folder (default .sal/cache)", default=None)
     parser.addini("sal_cache_size", "cache size limit, e.g. 5GB (default: none)", default=None)
     parser.addini("sal_history_dir", "history store (default .sal/history)", default=None)
@@ -142,12 +209,20 @@ def add_options(parser: pytest.Parser) -> None:
     parser.addini("sal_compare_missing", "pass or fail: a test with no baseline to compare with (default pass)", default="pass")
     parser.addini("sal_tolerance", "default search tolerance: the bracket's width in percent of its larger end (default 10)", default="10")
     parser.addini("sal_max_trials", "default trial budget of a boundary search (default 8)", default="8")
-    parser.addini("sal_runs", "the most runs per trial; runs vote until one verdict leads by 2 (default auto: 1 for a deterministic system, 5 for a noisy one)", default="auto")
+    parser.addini(
+        "sal_runs",
+        "the most runs per trial; runs vote until one verdict leads by 2 (default auto: 1 for a deterministic system, 5 for a noisy one)",
+        default="auto",
+    )
     parser.addini("sal_seed", "perturbation seed (default 0)", default="0")
     parser.addini("sal_timeout", "seconds per SLAM run before it is killed (default 600)", default="600")
     parser.addini("sal_system", "default system: orbslam3 when installed, else reference_vo", default=None)
-    parser.addini("sal_kitti_segments", "segment lengths (m) of the KITTI metrics t_rel / r_rel, e.g. 10,20,30,40 for a short sequence "
-                  "(default the KITTI devkit's 100,200,...,800)", default="100,200,300,400,500,600,700,800")
+    parser.addini(
+        "sal_kitti_segments",
+        "segment lengths (m) of the KITTI metrics t_rel / r_rel, e.g. 10,20,30,40 for a short sequence "
+        "(default the KITTI devkit's 100,200,...,800)",
+        default="100,200,300,400,500,600,700,800",
+    )
 
 
 def _shown(path: Path) -> str:
@@ -219,7 +294,9 @@ class SalSession:
             from sal_wrappers import SYSTEMS
 
             if self.system_name not in SYSTEMS.names():
-                raise pytest.UsageError(f"pytest-sal: ini option sal_system = {self.system_name!r}: unknown SLAM system; known: {', '.join(SYSTEMS.names())}")
+                raise pytest.UsageError(
+                    f"pytest-sal: ini option sal_system = {self.system_name!r}: unknown SLAM system; known: {', '.join(SYSTEMS.names())}"
+                )
         self.outcomes: list[Any] = []
         self.unwritten: list[str] = []  # outputs finish() could not write, said in the summary
         self.written: list[Path] = []  # the files finish() wrote, named in the summary
@@ -272,24 +349,33 @@ class SalSession:
     # -- running -------------------------------------------------------------------------------
     def _runner(self, item: pytest.Item, ref: Any, dataset: Any, system: Any, runs: int | None, workdir: Path) -> Any:
         """The trial runner of ``item``; under ``-v`` it prints each trial as it ends."""
+        from pytest_sal.engine.trial_runner import TrialRunner
         from pytest_sal.progress import trial_printer
         from pytest_sal.report.outcome_report import trial_metric_names
-        from pytest_sal.engine.trial_runner import TrialRunner
 
         requirement = item.function.sal_requirement  # type: ignore[attr-defined]
         seed = int(requirement.options.get("seed", self.seed))
         metrics = trial_metric_names([(c.metric.name, c.op, c.threshold) for c in requirement.criteria])  # as the reports show them
         return TrialRunner(
-            dataset, ref, system, requirement, runs=runs, seed=seed, cache=self.cache, workdir=workdir, timeout=self.timeout,
+            dataset,
+            ref,
+            system,
+            requirement,
+            runs=runs,
+            seed=seed,
+            cache=self.cache,
+            workdir=workdir,
+            timeout=self.timeout,
             artifacts=bool(self.config.option.sal_report_html or getattr(self.config.option, "htmlpath", None)),  # ours or pytest-html's
-            cache_frames=bool(self.config.option.sal_cache_frames), kitti_segments=self.kitti_segments,
+            cache_frames=bool(self.config.option.sal_cache_frames),
+            kitti_segments=self.kitti_segments,
             progress=trial_printer(self.config, item.nodeid, ref.label, ref.unit, metrics),
         )
 
     def search(self, item: pytest.Item, dataset: Any, system: Any, runs: int | None, workdir: Path) -> Any:
         """Boundary search of ``item``'s requirement; compared with the history when asked."""
-        from pytest_sal.history.regression import warm_start
         from pytest_sal.engine.requirement_runner import search_outcome
+        from pytest_sal.history.regression import warm_start
 
         requirement = item.function.sal_requirement  # type: ignore[attr-defined]
         runner = self._runner(item, requirement.envelope.ref, dataset, system, runs, workdir)
@@ -366,7 +452,9 @@ class SalSession:
         if not missing:
             return []
         effect = "failed" if self.compare_missing == "fail" else "passed without a comparison; --sal-compare-missing=fail fails them"
-        return [f"{len(missing)} of {len(self.outcomes)} tests not compared with {self.compare!r} ({effect}): {missing[0].comparison[len(NOT_COMPARED):]}"]
+        return [
+            f"{len(missing)} of {len(self.outcomes)} tests not compared with {self.compare!r} ({effect}): {missing[0].comparison[len(NOT_COMPARED) :]}"
+        ]
 
     def finish(self) -> None:
         """Write the history and the reports (controller only); ``terminal_summary`` then
@@ -386,7 +474,11 @@ class SalSession:
         option = self.config.option
         name = self._save_name()
         writes = [
-            ("history", None if option.sal_no_history else self.history_dir, lambda: self.history.append_run(self.outcomes, name=name, machine=machine)),
+            (
+                "history",
+                None if option.sal_no_history else self.history_dir,
+                lambda: self.history.append_run(self.outcomes, name=name, machine=machine),
+            ),
             ("--sal-report-md", option.sal_report_md, lambda: write_markdown(self.outcomes, Path(option.sal_report_md))),
             ("--sal-report-html", option.sal_report_html, lambda: write_html_report(self.outcomes, Path(option.sal_report_html))),
         ]
@@ -405,6 +497,8 @@ class SalSession:
         name = self.config.option.sal_save
         failed = [o for o in self.outcomes if o.regression]
         if name and failed:
-            self.notes.append(f"this run is saved without the name {name!r}: {len(failed)} test(s) failed the --sal-compare gate, so it cannot become the baseline")
+            self.notes.append(
+                f"this run is saved without the name {name!r}: {len(failed)} test(s) failed the --sal-compare gate, so it cannot become the baseline"
+            )
             return None
         return name

@@ -51,13 +51,15 @@ class FakeSlam(SlamSystem):
     sensors = ("mono", "stereo", "rgbd")
     description = "deterministic fake SLAM for testing the plugin (tracking falls with severity)"
 
-    def __init__(self, parameter: str = "fog.visibility_m", tracked: str = "min(1, v / 40)", flaky: float = 0.0, calls_file: str | None = None):
+    def __init__(
+        self, parameter: str = "fog.visibility_m", tracked: str = "min(1, v / 40)", flaky: float = 0.0, calls_file: str | None = None
+    ):
         self.parameter = parameter
         self.tracked = tracked
         self.flaky = float(flaky)
         self.calls_file = calls_file
         self.deterministic = not self.flaky  # type: ignore[misc]  # one run per trial unless flaky
-        self._share: Callable[[float], float] = eval(f"lambda v: {tracked}", {"min": min, "max": max, "abs": abs})  # noqa: S307 - a test double's own option
+        self._share: Callable[[float], float] = eval(f"lambda v: {tracked}", {"min": min, "max": max, "abs": abs})
         self._runs = 0
 
     def options(self) -> dict[str, Any]:
@@ -81,7 +83,14 @@ class FakeSlam(SlamSystem):
         if tracked and sequence.groundtruth is not None and sequence.groundtruth_is_per_frame:
             trajectory = sequence.groundtruth.select(list(range(tracked)))
         return RunResult(
-            system=self.name, sequence=sequence.name, sensor=sequence.sensor, timestamps=sequence.timestamps,
-            states=states, trajectory=trajectory, maps=1 if tracked else 0, wall_time_s=time.perf_counter() - start,
-            track_time_s=0.0, info={"value": value, "share": share},
+            system=self.name,
+            sequence=sequence.name,
+            sensor=sequence.sensor,
+            timestamps=sequence.timestamps,
+            states=states,
+            trajectory=trajectory,
+            maps=1 if tracked else 0,
+            wall_time_s=time.perf_counter() - start,
+            track_time_s=0.0,
+            info={"value": value, "share": share},
         )

@@ -23,14 +23,14 @@ if TYPE_CHECKING:  # what type checkers see; at run time each name loads on firs
     from sal_adapters.trajectory import Trajectory
 
 __all__ = [
-    "Camera",
     "DATASETS",
+    "SENSORS",
+    "Camera",
     "DatasetError",
     "DatasetKind",
     "DatasetWarning",
     "Frame",
     "FrameRecord",
-    "SENSORS",
     "SalError",
     "Sensor",
     "Sequence",
@@ -40,10 +40,13 @@ __all__ = [
     "write_sequence",
 ]
 
-__getattr__, __dir__ = lazy_exports(__name__, {
-    "sal_adapters.camera": ["Camera"],
-    "sal_adapters.datasets": ["DATASETS", "DatasetKind", "open_dataset", "truncate", "write_sequence"],
-    "sal_adapters.errors": ["DatasetError", "DatasetWarning", "SalError"],
-    "sal_adapters.sequence": ["SENSORS", "Frame", "FrameRecord", "Sensor", "Sequence"],
-    "sal_adapters.trajectory": ["Trajectory"],
-})
+__getattr__, __dir__ = lazy_exports(
+    __name__,
+    {
+        "sal_adapters.camera": ["Camera"],
+        "sal_adapters.datasets": ["DATASETS", "DatasetKind", "open_dataset", "truncate", "write_sequence"],
+        "sal_adapters.errors": ["DatasetError", "DatasetWarning", "SalError"],
+        "sal_adapters.sequence": ["SENSORS", "Frame", "FrameRecord", "Sensor", "Sequence"],
+        "sal_adapters.trajectory": ["Trajectory"],
+    },
+)

@@ -23,12 +23,12 @@ if TYPE_CHECKING:  # the registry (DATASETS.names() in the sal command's help) n
     from sal_adapters.sequence import Frame, Sequence
 
 __all__ = [
-    "DatasetKind",
     "DATASETS",
     "WRITTEN_MARKER",
+    "DatasetKind",
     "open_dataset",
-    "write_sequence",
     "truncate",
+    "write_sequence",
 ]
 
 #: File left in every folder ``write_sequence`` made: what was written and how to reopen it.

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from os import PathLike
 
-__all__ = ["SalError", "DatasetError", "DatasetWarning", "CacheWarning", "WriteError"]
+__all__ = ["CacheWarning", "DatasetError", "DatasetWarning", "SalError", "WriteError"]
 
 
 class SalError(Exception):

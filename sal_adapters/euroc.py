@@ -30,7 +30,7 @@ from sal_adapters.sequence import Frame, FrameRecord, Sequence
 from sal_adapters.textfiles import atomic_write_text, check_times, read_rows, read_text
 from sal_adapters.trajectory import Trajectory, seconds_to_ns
 
-__all__ = ["EUROC", "EurocDataset", "CameraSensor", "FrameRow", "read_camera_sensor", "read_sensor_yaml", "read_frame_csv"]
+__all__ = ["EUROC", "CameraSensor", "EurocDataset", "FrameRow", "read_camera_sensor", "read_frame_csv", "read_sensor_yaml"]
 
 #: Keys every camera ``sensor.yaml`` must hold.
 CAMERA_KEYS = ("T_BS", "rate_hz", "resolution", "intrinsics", "distortion_coefficients")
@@ -166,8 +166,7 @@ class EurocDataset(DatasetKind):
             ns = record.timestamp_ns if record.timestamp_ns is not None else seconds_to_ns(record.timestamp)
             if stamps and ns <= stamps[-1]:
                 raise DatasetError(
-                    f"EuRoC names frames by their time in ns, which must increase: frame {record.index} "
-                    f"at {ns} ns follows {stamps[-1]} ns",
+                    f"EuRoC names frames by their time in ns, which must increase: frame {record.index} at {ns} ns follows {stamps[-1]} ns",
                     sequence.source,
                 )
             stamps.append(ns)
@@ -265,9 +264,7 @@ def read_frame_csv(path: Path) -> list[FrameRow]:
     return rows
 
 
-def _usable_frames(
-    rows0: list[FrameRow], rows1: list[FrameRow], stereo: bool, mav0: Path
-) -> list[tuple[int, FrameRow, FrameRow | None]]:
+def _usable_frames(rows0: list[FrameRow], rows1: list[FrameRow], stereo: bool, mav0: Path) -> list[tuple[int, FrameRow, FrameRow | None]]:
     """``(cam0 row position, cam0 row, cam1 row)`` of the frames whose images exist (and pair up);
     one ``DatasetWarning`` per ``data.csv`` that loses rows."""
     present0 = _present(rows0)
@@ -328,9 +325,7 @@ def _groundtruth(seq_dir: Path, T_BS0: np.ndarray, explicit: str | Path | None, 
             if "T_BS" in data:  # pose of the estimated frame in the body frame
                 T_gt_body = np.linalg.inv(_matrix(data["T_BS"], gt_dir / "sensor.yaml"))
     else:
-        found = sorted(
-            p for p in seq_dir.glob("*.csv") if p.is_file() and (p.name.lower().startswith("groundtruth") or "_GT" in p.name)
-        )
+        found = sorted(p for p in seq_dir.glob("*.csv") if p.is_file() and (p.name.lower().startswith("groundtruth") or "_GT" in p.name))
         if not found:
             return None
         if len(found) > 1:
@@ -411,7 +406,13 @@ def _matrix(value: Any, path: Path) -> np.ndarray:
 
 def _same_intrinsics(a: Camera, b: Camera) -> bool:
     return (a.fx, a.fy, a.cx, a.cy, a.width, a.height, tuple(a.distortion)) == (
-        b.fx, b.fy, b.cx, b.cy, b.width, b.height, tuple(b.distortion)
+        b.fx,
+        b.fy,
+        b.cx,
+        b.cy,
+        b.width,
+        b.height,
+        tuple(b.distortion),
     )
 
 

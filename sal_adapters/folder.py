@@ -47,7 +47,7 @@ from sal_adapters.sequence import Frame, FrameRecord, Sequence
 from sal_adapters.textfiles import atomic_write_text, format_float, read_rows
 from sal_adapters.trajectory import Trajectory
 
-__all__ = ["FOLDER", "FolderDataset", "DEFAULT_FPS", "TIMESTAMP_FILES"]
+__all__ = ["DEFAULT_FPS", "FOLDER", "TIMESTAMP_FILES", "FolderDataset"]
 
 #: Frame rate (Hz) assumed when neither timestamps nor ``fps`` are given.
 DEFAULT_FPS = 30.0

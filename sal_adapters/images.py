@@ -12,7 +12,17 @@ import numpy as np
 from sal_adapters.atomic import staged_file
 from sal_adapters.errors import DatasetError
 
-__all__ = ["IMAGE_SUFFIXES", "is_grey", "probe_image", "read_depth", "read_image", "read_stored", "scaled_to_width", "write_depth", "write_image"]
+__all__ = [
+    "IMAGE_SUFFIXES",
+    "is_grey",
+    "probe_image",
+    "read_depth",
+    "read_image",
+    "read_stored",
+    "scaled_to_width",
+    "write_depth",
+    "write_image",
+]
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".pgm")
 

@@ -82,8 +82,12 @@ class KittiDataset(DatasetKind):
         first = read_image(left_files[0])
         P_left = calib[left_key]
         camera = Camera(
-            fx=P_left[0, 0], fy=P_left[1, 1], cx=P_left[0, 2], cy=P_left[1, 2],
-            width=first.shape[1], height=first.shape[0],
+            fx=P_left[0, 0],
+            fy=P_left[1, 1],
+            cx=P_left[0, 2],
+            cy=P_left[1, 2],
+            width=first.shape[1],
+            height=first.shape[0],
         )
         t_left = _camera0_to_camera(P_left)
         if stereo:

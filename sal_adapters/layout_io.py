@@ -35,15 +35,15 @@ from sal_adapters.textfiles import atomic_write_text, check_times, format_float,
 
 __all__ = [
     "CAMERA_FILE",
-    "read_camera_yaml",
-    "write_camera_yaml",
-    "select_camera",
-    "parse_numbers",
-    "read_list",
-    "fps_from_timestamps",
-    "natural_key",
-    "frame_file_stem",
     "checked_image",
+    "fps_from_timestamps",
+    "frame_file_stem",
+    "natural_key",
+    "parse_numbers",
+    "read_camera_yaml",
+    "read_list",
+    "select_camera",
+    "write_camera_yaml",
 ]
 
 #: Name of the camera description the ``tum`` and ``folder`` layouts read and write.

@@ -13,7 +13,7 @@ from typing import Generic, TypeVar
 from sal_adapters.errors import SalError
 from sal_adapters.suggest import suggestion
 
-__all__ = ["PluginError", "EntryPointRegistry"]
+__all__ = ["EntryPointRegistry", "PluginError"]
 
 T = TypeVar("T")
 

@@ -8,7 +8,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
-from typing import Any, Literal, Union
+from typing import Any, Literal
 
 import numpy as np
 
@@ -17,13 +17,13 @@ from sal_adapters.errors import DatasetError
 from sal_adapters.images import read_depth, read_image
 from sal_adapters.trajectory import Trajectory
 
-__all__ = ["Sensor", "SENSORS", "Source", "FrameRecord", "Frame", "Sequence"]
+__all__ = ["SENSORS", "Frame", "FrameRecord", "Sensor", "Sequence", "Source"]
 
 Sensor = Literal["mono", "stereo", "rgbd"]
 SENSORS: tuple[str, ...] = ("mono", "stereo", "rgbd")
 
 #: Where a frame's pixels come from: an image file, or a function that makes them.
-Source = Union[Path, Callable[[], np.ndarray]]
+Source = Path | Callable[[], np.ndarray]
 
 
 @dataclass(frozen=True)

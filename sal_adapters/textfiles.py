@@ -14,7 +14,7 @@ from sal_adapters.errors import DatasetError
 if TYPE_CHECKING:  # numpy loads with read_numeric_table: writers such as the sal commands stay light
     import numpy as np
 
-__all__ = ["read_text", "read_rows", "read_numeric_table", "check_times", "atomic_write", "atomic_write_text", "format_float"]
+__all__ = ["atomic_write", "atomic_write_text", "check_times", "format_float", "read_numeric_table", "read_rows", "read_text"]
 
 
 def read_text(path: Path, what: str = "file") -> str:
@@ -103,7 +103,9 @@ def check_times(rows: Iterable[tuple[int, float]], path: Path, unit: str = "s", 
         if increasing and previous is not None:
             line, before = previous
             if not t > before:
-                raise DatasetError(f"time {_shown(t)} {unit} is not after line {line}'s {_shown(before)} {unit} (frame times must increase)", path, number)
+                raise DatasetError(
+                    f"time {_shown(t)} {unit} is not after line {line}'s {_shown(before)} {unit} (frame times must increase)", path, number
+                )
             step = t - before
             if not (_finite(step) and _finite(1.0 / step)):
                 raise DatasetError(
@@ -136,7 +138,10 @@ def atomic_write(path: str | Path, write: Callable[[IO[Any]], None], binary: boo
     flushed to disk and moved into place with ``os.replace``: readers see the old file or the
     whole new one, never a part. The file gets the usual permissions (0666 less the umask); an
     ``OSError`` raises ``WriteError`` naming ``path``."""
-    with staged_file(path) as temp, open(temp, "wb" if binary else "w", **({} if binary else {"encoding": "utf-8", "newline": "\n"})) as handle:
+    with (
+        staged_file(path) as temp,
+        open(temp, "wb" if binary else "w", **({} if binary else {"encoding": "utf-8", "newline": "\n"})) as handle,
+    ):
         write(handle)
         handle.flush()
         os.fsync(handle.fileno())

@@ -38,7 +38,7 @@ from sal_adapters.sequence import Frame, FrameRecord, Sequence
 from sal_adapters.textfiles import atomic_write_text, format_float
 from sal_adapters.trajectory import Trajectory
 
-__all__ = ["TUM", "TumDataset", "FREIBURG_CAMERAS", "ROS_DEFAULT_INTRINSICS", "DEPTH_SCALE", "associate", "freiburg_camera"]
+__all__ = ["DEPTH_SCALE", "FREIBURG_CAMERAS", "ROS_DEFAULT_INTRINSICS", "TUM", "TumDataset", "associate", "freiburg_camera"]
 
 #: Freiburg camera -> ((fx, fy, cx, cy) px, OpenCV distortion k1 k2 p1 p2 k3), from the TUM site.
 FREIBURG_CAMERAS: dict[int, tuple[tuple[float, float, float, float], tuple[float, ...]]] = {

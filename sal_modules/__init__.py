@@ -26,15 +26,15 @@ if TYPE_CHECKING:  # what type checkers see; at run time each name loads on firs
     from sal_modules.registry import PERTURBATIONS, create, from_dict, from_json, module_class
 
 __all__ = [
+    "PERTURBATIONS",
+    "STREAMS",
     "Composite",
     "DepthUnavailable",
     "ModuleContext",
     "ModuleError",
-    "PERTURBATIONS",
     "Param",
     "ParameterError",
     "Perturbation",
-    "STREAMS",
     "SearchScale",
     "SequencePerturbation",
     "chain_of",
@@ -52,15 +52,21 @@ def _registered(name: str) -> Any:
     from sal_modules.registry import PERTURBATIONS, module_class
 
     if name not in PERTURBATIONS.names():
-        raise AttributeError(f"module 'sal_modules' has no attribute {name!r}" + suggestion(name, [*PERTURBATIONS.names(), *__all__], "modules and names"))
+        raise AttributeError(
+            f"module 'sal_modules' has no attribute {name!r}" + suggestion(name, [*PERTURBATIONS.names(), *__all__], "modules and names")
+        )
     return module_class(name)
 
 
-__getattr__, __dir__ = lazy_exports(__name__, {
-    "sal_modules.base": ["STREAMS", "ModuleContext", "Perturbation", "SequencePerturbation"],
-    "sal_modules.chain": ["Composite"],
-    "sal_modules.errors": ["DepthUnavailable", "ModuleError", "ParameterError"],
-    "sal_modules.params": ["Param", "SearchScale"],
-    "sal_modules.pipeline": ["chain_of", "perturb"],
-    "sal_modules.registry": ["PERTURBATIONS", "create", "from_dict", "from_json", "module_class"],
-}, fallback=_registered)
+__getattr__, __dir__ = lazy_exports(
+    __name__,
+    {
+        "sal_modules.base": ["STREAMS", "ModuleContext", "Perturbation", "SequencePerturbation"],
+        "sal_modules.chain": ["Composite"],
+        "sal_modules.errors": ["DepthUnavailable", "ModuleError", "ParameterError"],
+        "sal_modules.params": ["Param", "SearchScale"],
+        "sal_modules.pipeline": ["chain_of", "perturb"],
+        "sal_modules.registry": ["PERTURBATIONS", "create", "from_dict", "from_json", "module_class"],
+    },
+    fallback=_registered,
+)

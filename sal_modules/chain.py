@@ -22,8 +22,8 @@ import numpy as np
 from sal_adapters.suggest import suggestion
 from sal_modules.base import ModuleContext, Perturbation
 from sal_modules.errors import ParameterError
-from sal_modules.params import Param
 from sal_modules.param_refs import ParamRef
+from sal_modules.params import Param
 
 __all__ = ["Composite"]
 
@@ -74,7 +74,9 @@ class Composite(Perturbation):
         known = self.addresses()
         if address not in known:
             plain = [a for a in known if "@" not in a]
-            raise ParameterError(f"composite {self.label()} has no parameter {address!r}" + suggestion(address, plain or known, "addresses"))
+            raise ParameterError(
+                f"composite {self.label()} has no parameter {address!r}" + suggestion(address, plain or known, "addresses")
+            )
         return known[address]
 
     def __getattr__(self, name: str) -> ParamRef:
@@ -112,8 +114,17 @@ class Composite(Perturbation):
     def describe(cls) -> dict[str, Any]:
         info = super().describe()
         info["parameters"] = [
-            {"name": "steps", "unit": "", "default": [], "min": None, "max": None, "domain": "list",
-             "searchable": False, "worse": None, "doc": "modules applied in order; child parameters by address (fog.visibility_m)"}
+            {
+                "name": "steps",
+                "unit": "",
+                "default": [],
+                "min": None,
+                "max": None,
+                "domain": "list",
+                "searchable": False,
+                "worse": None,
+                "doc": "modules applied in order; child parameters by address (fog.visibility_m)",
+            }
         ]
         return info
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from sal_adapters.errors import SalError
 
-__all__ = ["ModuleError", "ParameterError", "DepthUnavailable"]
+__all__ = ["DepthUnavailable", "ModuleError", "ParameterError"]
 
 
 class ModuleError(SalError):

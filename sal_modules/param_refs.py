@@ -15,7 +15,7 @@ if TYPE_CHECKING:
     from sal_modules.base import Perturbation
     from sal_modules.params import Param
 
-__all__ = ["Bound", "ParamRef", "COMPARISONS"]
+__all__ = ["COMPARISONS", "Bound", "ParamRef"]
 
 #: Comparison operators a bound may use, with their meaning in words.
 COMPARISONS = {">=": "at least", ">": "above", "<=": "at most", "<": "below"}

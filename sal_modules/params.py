@@ -24,7 +24,7 @@ from sal_modules.errors import ParameterError
 if TYPE_CHECKING:
     from sal_modules.param_refs import Bound, ParamRef
 
-__all__ = ["Domain", "Worse", "SearchScale", "Param"]
+__all__ = ["Domain", "Param", "SearchScale", "Worse"]
 
 Domain = Literal["continuous", "integer", "choice", "vector", "flag", "text"]
 Worse = Literal["higher", "lower"]

@@ -24,7 +24,7 @@ from sal_modules.chain import Composite
 from sal_modules.depth import DepthProvider, select_depth_provider
 from sal_modules.errors import ModuleError
 
-__all__ = ["perturb", "chain_of"]
+__all__ = ["chain_of", "perturb"]
 
 
 def chain_of(modules: Perturbation | type[Perturbation] | Iterable[Perturbation | type[Perturbation]]) -> Composite:

@@ -9,7 +9,7 @@ from sal_adapters.plugins import EntryPointRegistry
 from sal_modules.base import Perturbation
 from sal_modules.errors import ParameterError
 
-__all__ = ["PERTURBATIONS", "module_class", "create", "from_dict", "from_json"]
+__all__ = ["PERTURBATIONS", "create", "from_dict", "from_json", "module_class"]
 
 #: Perturbation modules by name; built-ins and plug-ins register in ``sal.perturbations``.
 PERTURBATIONS: EntryPointRegistry[type[Perturbation]] = EntryPointRegistry("sal.perturbations", "perturbation module")
@@ -36,7 +36,9 @@ def from_dict(data: Mapping[str, Any]) -> Perturbation:
         raise ParameterError(f"a module description needs a 'module' key, got {data!r}")
     extra = set(data) - {"module", "version", "params", "steps"}
     if extra:
-        raise ParameterError(f"module description for {data['module']!r} has unknown keys {sorted(extra)}; allowed: module, version, params, steps")
+        raise ParameterError(
+            f"module description for {data['module']!r} has unknown keys {sorted(extra)}; allowed: module, version, params, steps"
+        )
     if "steps" in data:
         return create(str(data["module"]), steps=data["steps"])
     params = data.get("params") or {}

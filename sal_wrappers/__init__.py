@@ -20,7 +20,7 @@ if TYPE_CHECKING:  # what type checkers see; at run time each name loads on firs
     from sal_wrappers.base import RunResult, SlamSystem, SlamSystemError, TrackState
     from sal_wrappers.pacing import machine_load, oversubscribed_warning
 
-__all__ = ["RunResult", "SYSTEMS", "SlamSystem", "SlamSystemError", "TrackState", "create", "machine_load", "oversubscribed_warning"]
+__all__ = ["SYSTEMS", "RunResult", "SlamSystem", "SlamSystemError", "TrackState", "create", "machine_load", "oversubscribed_warning"]
 
 #: SLAM systems by name; built-ins and plug-ins register in ``sal.systems``.
 SYSTEMS: EntryPointRegistry[type[SlamSystem]] = EntryPointRegistry("sal.systems", "SLAM system")
@@ -33,7 +33,10 @@ def create(kind: str, /, **options: Any) -> SlamSystem:
     return SYSTEMS.get(kind)(**options)
 
 
-__getattr__, __dir__ = lazy_exports(__name__, {
-    "sal_wrappers.base": ["RunResult", "SlamSystem", "SlamSystemError", "TrackState"],
-    "sal_wrappers.pacing": ["machine_load", "oversubscribed_warning"],
-})
+__getattr__, __dir__ = lazy_exports(
+    __name__,
+    {
+        "sal_wrappers.base": ["RunResult", "SlamSystem", "SlamSystemError", "TrackState"],
+        "sal_wrappers.pacing": ["machine_load", "oversubscribed_warning"],
+    },
+)

@@ -109,7 +109,11 @@ def run_child(
         with open(log_path, "wb") as log:
             process = subprocess.Popen(
                 [sys.executable, "-m", "sal_wrappers.child_process", entry, str(result_path)],
-                stdin=subprocess.PIPE, stdout=log, stderr=subprocess.STDOUT, env=guard.environ(env), start_new_session=True,
+                stdin=subprocess.PIPE,
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                env=guard.environ(env),
+                start_new_session=True,
             )
         guard.watch(process.pid)
         status, timed_out, feed_error = _feed(process, header, frames, timeout)
@@ -139,7 +143,9 @@ def write_result(path: Path, data: dict[str, Any]) -> None:
     atomic_write_text(Path(path), json.dumps(data))
 
 
-def _feed(process: subprocess.Popen[bytes], header: dict[str, Any], frames: Iterable[Any], timeout: float | None) -> tuple[int, bool, BaseException | None]:
+def _feed(
+    process: subprocess.Popen[bytes], header: dict[str, Any], frames: Iterable[Any], timeout: float | None
+) -> tuple[int, bool, BaseException | None]:
     """Stream the messages into the child and wait for it; ``(exit status, timed out, error
     producing a frame)``. The child's process group is killed when it timed out, when a frame
     could not be produced, and whatever is left of it when the child exits."""

@@ -66,6 +66,7 @@ from sal_adapters.textfiles import (
 from sal_adapters.trajectory import seconds_to_ns
 from sal_wrappers.base import WRITTEN_BEFORE_FAILURE, RunResult, SlamSystem, SlamSystemError, TrackState, file_sha256
 from sal_wrappers.child_process import describe_exit, log_tail
+from sal_wrappers.process_group import run_process_group
 from sal_wrappers.program_output import (
     OUTPUT_FORMATS,
     TIME_UNITS,
@@ -76,7 +77,6 @@ from sal_wrappers.program_output import (
     snapshot,
     written_since,
 )
-from sal_wrappers.process_group import run_process_group
 
 __all__ = ["PLACEHOLDERS", "CommandSystem"]
 
@@ -122,8 +122,24 @@ LOG_NAME = "run.log"
 
 _TOKEN = re.compile(r"\{\{|\}\}|\{([A-Za-z_][A-Za-z0-9_]*)\}")
 _OPTIONS = (
-    "argv", "prefix", "output", "output_format", "time_unit", "keyframes", "layout", "sensor", "mode", "grayscale",
-    "stage_dir", "settings", "env", "cwd", "name", "version", "depends", "deterministic",
+    "argv",
+    "prefix",
+    "output",
+    "output_format",
+    "time_unit",
+    "keyframes",
+    "layout",
+    "sensor",
+    "mode",
+    "grayscale",
+    "stage_dir",
+    "settings",
+    "env",
+    "cwd",
+    "name",
+    "version",
+    "depends",
+    "deterministic",
 )
 _NAME = re.compile(r"[A-Za-z0-9._-]{1,64}")
 #: Most a ``depends`` folder may hold (its files are hashed for the cache key).
@@ -201,7 +217,9 @@ class CommandSystem(SlamSystem):
     def __init__(self, **options: Any):
         name = options.get("name", "command")
         if not isinstance(name, str) or not _NAME.fullmatch(name):
-            raise SlamSystemError(f"command: option name={name!r} is not allowed: give 1 to 64 letters, digits, '.', '_' or '-' (the name shown in results and history)")
+            raise SlamSystemError(
+                f"command: option name={name!r} is not allowed: give 1 to 64 letters, digits, '.', '_' or '-' (the name shown in results and history)"
+            )
         self.name = name
         unknown = sorted(set(options) - set(_OPTIONS))
         if unknown:
@@ -210,7 +228,9 @@ class CommandSystem(SlamSystem):
                 f"allowed: {', '.join(o for o in _OPTIONS if o != 'mode')} (mode is a synonym of sensor)"
             )
         if "argv" not in options or options["argv"] is None:
-            raise SlamSystemError('command: option argv is required: the program and its arguments as a list, e.g. argv=["./slam", "{sequence}", "{output}"]')
+            raise SlamSystemError(
+                'command: option argv is required: the program and its arguments as a list, e.g. argv=["./slam", "{sequence}", "{output}"]'
+            )
         self.argv = _string_list("argv", options["argv"], allow_empty=False)
         self.prefix = _string_list("prefix", options.get("prefix") or [], allow_empty=True)
 
@@ -233,15 +253,21 @@ class CommandSystem(SlamSystem):
 
         self.layout = options.get("layout")
         if self.layout is not None and (not isinstance(self.layout, str) or self.layout not in DATASETS.names()):
-            raise SlamSystemError(f"command: layout {self.layout!r} is not a dataset layout; allowed: {', '.join(DATASETS.names())} (default: the sequence's own)")
+            raise SlamSystemError(
+                f"command: layout {self.layout!r} is not a dataset layout; allowed: {', '.join(DATASETS.names())} (default: the sequence's own)"
+            )
         sensor, mode = options.get("sensor"), options.get("mode")
         if sensor is not None and mode is not None and sensor != mode:
             raise SlamSystemError(f"command: sensor={sensor!r} and mode={mode!r} disagree (they are the same option)")
         self.sensor = sensor if sensor is not None else mode
         if self.sensor is not None and (not isinstance(self.sensor, str) or self.sensor not in self.sensors):
-            raise SlamSystemError(f"command: sensor {self.sensor!r} is not known; allowed: {', '.join(self.sensors)} (default: the sequence's own)")
+            raise SlamSystemError(
+                f"command: sensor {self.sensor!r} is not known; allowed: {', '.join(self.sensors)} (default: the sequence's own)"
+            )
         if self.layout in LAYOUT_SENSORS and self.sensor is not None and self.sensor not in LAYOUT_SENSORS[self.layout]:
-            raise SlamSystemError(f"command: the {self.layout} layout cannot hold {self.sensor} data (it holds {', '.join(LAYOUT_SENSORS[self.layout])})")
+            raise SlamSystemError(
+                f"command: the {self.layout} layout cannot hold {self.sensor} data (it holds {', '.join(LAYOUT_SENSORS[self.layout])})"
+            )
         self.grayscale = options.get("grayscale")
         if self.grayscale is not None and not isinstance(self.grayscale, bool):
             raise SlamSystemError(f"command: grayscale must be True, False or None, got {self.grayscale!r}")
@@ -290,7 +316,9 @@ class CommandSystem(SlamSystem):
         self.depends = [Path(p).expanduser().resolve() for p in _string_list("depends", depends, allow_empty=True)]
         for path in self.depends:
             if not path.exists():
-                raise SlamSystemError(f"command: depends: {path} does not exist (list the files and folders whose content decides the results)")
+                raise SlamSystemError(
+                    f"command: depends: {path} does not exist (list the files and folders whose content decides the results)"
+                )
 
         self._check_placeholders()
 
@@ -307,21 +335,29 @@ class CommandSystem(SlamSystem):
         for where, text in fields:
             for name in placeholders_in(text):
                 if name not in PLACEHOLDERS:
-                    raise SlamSystemError(f"command: unknown placeholder {{{name}}} in {where} ({text!r}); known: {known} (write {{{{ and }}}} for literal braces)")
+                    raise SlamSystemError(
+                        f"command: unknown placeholder {{{name}}} in {where} ({text!r}); known: {known} (write {{{{ and }}}} for literal braces)"
+                    )
                 used.add(name)
         for number, line in enumerate(self._settings_text.splitlines(), start=1):
             for name in placeholders_in(line):
                 if name not in PLACEHOLDERS:
-                    raise SlamSystemError(f"command: {self.settings}:{number}: unknown placeholder {{{name}}} in the settings template; known: {known} (write {{{{ and }}}} for literal braces)")
+                    raise SlamSystemError(
+                        f"command: {self.settings}:{number}: unknown placeholder {{{name}}} in the settings template; known: {known} (write {{{{ and }}}} for literal braces)"
+                    )
                 used.add(name)
         for where, text in [("cwd", self.cwd or ""), ("output", self.output)]:
             bad = {"output", "output_times", "settings", "timestamps", "timestamps_ns", "associations"} & set(placeholders_in(text))
             if bad:
-                raise SlamSystemError(f"command: {where} cannot use {', '.join('{' + b + '}' for b in sorted(bad))} (only {{workdir}}, {{sequence}} and the sequence's figures)")
+                raise SlamSystemError(
+                    f"command: {where} cannot use {', '.join('{' + b + '}' for b in sorted(bad))} (only {{workdir}}, {{sequence}} and the sequence's figures)"
+                )
         if "settings" in used and self.settings is None:
             raise SlamSystemError("command: {settings} is used but no settings template was given (option settings=PATH)")
         if "output" in used and self.output_is_pattern:
-            raise SlamSystemError(f"command: output {self.output!r} is a glob pattern, so {{output}} has no single path; give output a file path")
+            raise SlamSystemError(
+                f"command: output {self.output!r} is a glob pattern, so {{output}} has no single path; give output a file path"
+            )
         if "associations" in used and self.layout not in (None, "tum"):
             raise SlamSystemError(f"command: {{associations}} needs the tum layout, but layout is {self.layout!r}")
         self._used = used
@@ -408,7 +444,9 @@ class CommandSystem(SlamSystem):
         if "associations" in self._used:
             source = staged / "associations.txt"
             if not source.is_file():
-                raise SlamSystemError(f"command: {{associations}} needs an RGB-D sequence staged in the tum layout (sensor rgbd, layout tum); {source} was not written")
+                raise SlamSystemError(
+                    f"command: {{associations}} needs an RGB-D sequence staged in the tum layout (sensor rgbd, layout tum); {source} was not written"
+                )
             rows = [line for line in source.read_text().splitlines() if line.strip() and not line.lstrip().startswith("#")]
             atomic_write_text(workdir / "associations.txt", "\n".join(rows) + "\n")
 
@@ -456,7 +494,9 @@ class CommandSystem(SlamSystem):
             if found is not None:
                 info["output"] = str(found)
                 try:
-                    trajectory = read_output(found, self.output_format, self.time_unit, stamps, times_path if written_since(times_path, before) else None)
+                    trajectory = read_output(
+                        found, self.output_format, self.time_unit, stamps, times_path if written_since(times_path, before) else None
+                    )
                 except DatasetError as exc:
                     output_error = f"unparsable output: {exc}"
                 except ValueError as exc:
@@ -534,7 +574,6 @@ class CommandSystem(SlamSystem):
         if self.settings is not None:
             values["settings"] = str(workdir / "settings" / self.settings.name)
         return values
-
 
 
 # -- helpers ---------------------------------------------------------------------------------------

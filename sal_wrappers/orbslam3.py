@@ -64,8 +64,8 @@ import numpy as np
 from sal_adapters import Sequence, Trajectory
 from sal_wrappers.base import WRITTEN_BEFORE_FAILURE, RunResult, SlamSystem, SlamSystemError, TrackState
 from sal_wrappers.child_process import ChildOutcome, run_child, write_result
-from sal_wrappers.pacing import load_figures, process_usage, repace
 from sal_wrappers.orbslam3_settings import OrbParameters, write_settings
+from sal_wrappers.pacing import load_figures, process_usage, repace
 from sal_wrappers.prefetch import prefetched
 
 __all__ = ["ORB_STATES", "OrbSlam3", "map_states", "read_final_trajectory", "segment_ids"]
@@ -224,7 +224,9 @@ class OrbSlam3(SlamSystem):
         load_retries: int = 2,
     ):
         if mode is not None and mode not in self.sensors:
-            raise SlamSystemError(f"orbslam3: option mode={mode!r} is not allowed; use one of {', '.join(self.sensors)} or None (the sequence's sensor)")
+            raise SlamSystemError(
+                f"orbslam3: option mode={mode!r} is not allowed; use one of {', '.join(self.sensors)} or None (the sequence's sensor)"
+            )
         self.mode = mode
         self.features = _check_int("features", features, 50, 100_000)
         self.scale_factor = _check_real("scale_factor", scale_factor, 1.0, 4.0, "with 1 < scale_factor <= 4")
@@ -317,7 +319,9 @@ class OrbSlam3(SlamSystem):
         if self.settings is not None:
             settings = self.settings
         else:
-            params = OrbParameters(self.features, self.scale_factor, self.levels, self.fast_threshold, self.min_fast_threshold, self.th_depth)
+            params = OrbParameters(
+                self.features, self.scale_factor, self.levels, self.fast_threshold, self.min_fast_threshold, self.th_depth
+            )
             settings = str(write_settings(workdir / "orbslam3_settings.yaml", sequence.camera, mode, sequence.fps, params))
         final_path = workdir / "final_trajectory_euroc.txt"
         final_path.unlink(missing_ok=True)
@@ -332,7 +336,9 @@ class OrbSlam3(SlamSystem):
             header["stall_s"] = float(self._stall_s)
         attempts: list[dict[str, Any]] = []
         while True:
-            outcome = run_child("sal_wrappers.orbslam3:_track", header, prefetched(_frames(sequence, mode)), workdir, timeout, log_name="orbslam3.log")
+            outcome = run_child(
+                "sal_wrappers.orbslam3:_track", header, prefetched(_frames(sequence, mode)), workdir, timeout, log_name="orbslam3.log"
+            )
             result = self._result(sequence, mode, outcome, header, final_path)
             attempts.append(_attempt(result))
             load = result.load
@@ -474,7 +480,15 @@ def _track(header: dict[str, Any], frames: Iterator[dict[str, Any]], result_path
     before each step that may crash."""
     import pyorbslam3
 
-    record: dict[str, Any] = {"phase": "loading", "raw_states": [], "poses": [], "track_times": [], "given": [], "points": [], "final_saved": False}
+    record: dict[str, Any] = {
+        "phase": "loading",
+        "raw_states": [],
+        "poses": [],
+        "track_times": [],
+        "given": [],
+        "points": [],
+        "final_saved": False,
+    }
     write_result(result_path, record)
     start = time.perf_counter()
     sensor = getattr(pyorbslam3.Sensor, _SENSORS[header["sensor"]])

@@ -27,7 +27,6 @@ import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Union
 
 import numpy as np
 
@@ -36,9 +35,9 @@ from sal_adapters.textfiles import atomic_write_text
 
 __all__ = [
     "DEFAULT_RGBD_BASELINE_M",
+    "VIEWER_KEYS",
     "Matrix",
     "OrbParameters",
-    "VIEWER_KEYS",
     "format_value",
     "settings_entries",
     "settings_yaml",
@@ -78,7 +77,7 @@ class Matrix:
         object.__setattr__(self, "values", a)
 
 
-Value = Union[bool, int, float, str, Matrix]
+Value = bool | int | float | str | Matrix
 
 
 @dataclass(frozen=True)

@@ -52,7 +52,10 @@ class RunGuard:
         try:
             self._watchdog = subprocess.Popen(
                 [sys.executable, "-I", "-S", watchdog.__file__, self.token],
-                stdin=read, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+                stdin=read,
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+                start_new_session=True,
             )
         except BaseException:
             os.close(self._pipe)
@@ -115,7 +118,9 @@ def wait_unreaped(process: subprocess.Popen[bytes]) -> None:
         process.wait()
 
 
-def run_process_group(command: list[str], cwd: Path, env: dict[str, str], log_path: Path, timeout: float | None) -> tuple[int | None, bool, float, str | None]:
+def run_process_group(
+    command: list[str], cwd: Path, env: dict[str, str], log_path: Path, timeout: float | None
+) -> tuple[int | None, bool, float, str | None]:
     """Run ``command`` in its own process group with stdout and stderr to ``log_path``.
 
     Returns ``(exit status, timed out, wall time, start error)``; past ``timeout`` the group gets
@@ -128,7 +133,15 @@ def run_process_group(command: list[str], cwd: Path, env: dict[str, str], log_pa
         log.write(f"$ {shlex.join(command)}\n".encode())
         log.flush()
         try:
-            process = subprocess.Popen(command, cwd=cwd, env=guard.environ(env), stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+            process = subprocess.Popen(
+                command,
+                cwd=cwd,
+                env=guard.environ(env),
+                stdin=subprocess.DEVNULL,
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                start_new_session=True,
+            )
         except FileNotFoundError:
             where = "not on PATH" if os.sep not in command[0] else "no such file"
             return None, False, time.monotonic() - start, f"executable not found: {command[0]!r} ({where})"

@@ -220,7 +220,9 @@ class Vocabulary:
         ids = np.arange(len(parents))
         wrong = np.flatnonzero((parents[1:] < 0) | (parents[1:] >= ids[1:]) | leaf[np.clip(parents[1:], 0, None)])
         if wrong.size:
-            raise VocabularyError(f"parent {parents[wrong[0] + 1]} is not an inner node listed before node {wrong[0] + 1}", path, wrong[0] + 2)
+            raise VocabularyError(
+                f"parent {parents[wrong[0] + 1]} is not an inner node listed before node {wrong[0] + 1}", path, wrong[0] + 2
+            )
         if np.any((descriptors < 0) | (descriptors > 255)):
             raise VocabularyError("descriptor bytes must be 0..255", path)
         childless = np.setdiff1d(np.flatnonzero(~leaf[1:]) + 1, parents[1:])
@@ -302,7 +304,9 @@ def build_vocabulary(
     return vocabulary
 
 
-def _split(words: np.ndarray, bits: np.ndarray, members: np.ndarray, k: int, rng: np.random.Generator, max_iterations: int) -> tuple[list[np.ndarray], list[np.ndarray]]:
+def _split(
+    words: np.ndarray, bits: np.ndarray, members: np.ndarray, k: int, rng: np.random.Generator, max_iterations: int
+) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """Member groups and their centres (32 uint8) of one node: one per distinct descriptor
     when there are at most ``k``, else k-majority clusters (empty ones dropped)."""
     points = words[members]

@@ -23,12 +23,25 @@ def screenshot(page: Path, workdir: Path, size: tuple[int, int] = (1280, 6000)) 
     assert CHROMIUM is not None
     shot = workdir / "screenshot.png"
     argv = [
-        CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-        "--disable-background-networking", "--disable-component-update", "--disable-sync", "--hide-scrollbars",
-        f"--user-data-dir={workdir / 'profile'}", "--force-device-scale-factor=1", f"--window-size={size[0]},{size[1]}",
-        f"--screenshot={shot}", page.as_uri(),
+        CHROMIUM,
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-quic",
+        "--no-first-run",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+        "--hide-scrollbars",
+        f"--user-data-dir={workdir / 'profile'}",
+        "--force-device-scale-factor=1",
+        f"--window-size={size[0]},{size[1]}",
+        f"--screenshot={shot}",
+        page.as_uri(),
     ]
-    done = subprocess.run(argv, check=False, capture_output=True, text=True, timeout=120, env={"HOME": str(workdir), "PATH": "/usr/bin:/bin"})
+    done = subprocess.run(
+        argv, check=False, capture_output=True, text=True, timeout=120, env={"HOME": str(workdir), "PATH": "/usr/bin:/bin"}
+    )
     assert done.returncode == 0 and shot.is_file(), done.stderr[-2000:]
     image = cv2.imread(str(shot), cv2.IMREAD_GRAYSCALE)
     assert image.shape == (size[1], size[0])

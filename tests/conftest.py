@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
+import pytest_sal.engine.trial_runner
 import pytest_sal.testing  # noqa: F401
-import pytest_sal.engine.trial_runner  # noqa: F401
 
 # Loaded here, before any test: pytester's in-process runs (runpytest without a subprocess)
 # unload the modules first imported inside them, and numpy cannot be imported twice in one
@@ -63,7 +63,9 @@ def isolated_sal_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
     default = pytest_sal.store.trial_cache.default_cache_dir
     with pytest.MonkeyPatch.context() as patch:
         patch.setenv("SAL_CACHE_DIR", str(root))
-        patch.setattr(pytest_sal.store.trial_cache, "default_cache_dir", lambda rootdir=None: commands_cache if rootdir is None else default(rootdir))
+        patch.setattr(
+            pytest_sal.store.trial_cache, "default_cache_dir", lambda rootdir=None: commands_cache if rootdir is None else default(rootdir)
+        )
         yield root
 
 

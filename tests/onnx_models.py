@@ -16,13 +16,19 @@ import numpy as np
 import onnx
 from onnx import TensorProto, helper, numpy_helper
 
-__all__ = ["write_onnx_model", "depth_model", "image_model"]
+__all__ = ["depth_model", "image_model", "write_onnx_model"]
 
 IR_VERSION = 10
 OPSET = 17
 
 
-def write_onnx_model(path: Path, nodes: list[onnx.NodeProto], outputs: list[onnx.ValueInfoProto], size: tuple[int, int] | None = None, initializers: dict[str, float] | None = None) -> Path:
+def write_onnx_model(
+    path: Path,
+    nodes: list[onnx.NodeProto],
+    outputs: list[onnx.ValueInfoProto],
+    size: tuple[int, int] | None = None,
+    initializers: dict[str, float] | None = None,
+) -> Path:
     """Check and save a one-input model: input ``image`` (``1 x 3 x H x W`` float32), the
     given ``nodes`` and ``outputs``; ``initializers`` become float32 scalar constants."""
     h, w = size if size is not None else ("H", "W")

@@ -21,7 +21,7 @@ MODES = [pytest.param([], id="serial"), pytest.param(["-n", "2"], id="xdist")]
 
 #: conftest of the inner suites: the fake per test name from tracked.json (a tracked
 #: expression, or FakeSlam keyword arguments), every SLAM run appended to calls.jsonl
-CONFTEST = '''
+CONFTEST = """
 import json
 from pathlib import Path
 
@@ -38,17 +38,17 @@ def sal_system(request):
     spec = table.get(request.node.originalname, table.get("*", "min(1, v / 40)"))
     options = {"tracked": spec} if isinstance(spec, str) else dict(spec)
     return FakeSlam(calls_file=str(HERE / "calls.jsonl"), **options)
-'''
+"""
 
 #: a 20-frame urban world instead of the default 60 frames (cheaper trials)
-SMALL_DATASET = '''
+SMALL_DATASET = """
 
 @pytest.fixture(scope="session")
 def sal_dataset():
     from sal_adapters import open_dataset
 
     return open_dataset("synthetic", scene="urban", frames=20, sensor="stereo")
-'''
+"""
 
 HEADER = """
 import pytest
@@ -59,7 +59,9 @@ from sal_modules import fog, rain
 
 
 # -- helpers ---------------------------------------------------------------------------------
-def project(pytester: pytest.Pytester, tests: str, tracked: dict[str, Any] | None = None, small: bool = True, name: str = "test_suite") -> None:
+def project(
+    pytester: pytest.Pytester, tests: str, tracked: dict[str, Any] | None = None, small: bool = True, name: str = "test_suite"
+) -> None:
     """An inner suite: the FakeSlam conftest, ``tracked.json`` and one test module."""
     pytester.makeconftest(CONFTEST + (SMALL_DATASET if small else ""))
     write_tracked(pytester, tracked or {})
@@ -73,7 +75,15 @@ def write_tracked(pytester: pytest.Pytester, tracked: dict[str, Any]) -> None:
 def run(pytester: pytest.Pytester, mode: list[str], *args: str) -> pytest.RunResult:
     """The inner session with its own cache and history folders; ``-n 2`` in a subprocess.
     Hypothesis' plugin is left out: it costs every inner interpreter a second of CPU."""
-    options = ["-p", "no:cacheprovider", "-p", "no:hypothesispytest", f"--sal-cache-dir={pytester.path / 'cache'}", f"--sal-history-dir={pytester.path / 'history'}", *args]
+    options = [
+        "-p",
+        "no:cacheprovider",
+        "-p",
+        "no:hypothesispytest",
+        f"--sal-cache-dir={pytester.path / 'cache'}",
+        f"--sal-history-dir={pytester.path / 'history'}",
+        *args,
+    ]
     if mode:
         return pytester.runpytest_subprocess(*mode, *options, timeout=300)
     return pytester.runpytest(*options)

@@ -51,7 +51,9 @@ def fake_system() -> Iterator[None]:
     SYSTEMS.unregister("fake")
 
 
-def write_config(tmp_path: Path, *, block: bool = True, enabled: bool = True, target: str = "fog_sweep", parameter: str = "visibility_m") -> Path:
+def write_config(
+    tmp_path: Path, *, block: bool = True, enabled: bool = True, target: str = "fog_sweep", parameter: str = "visibility_m"
+) -> Path:
     boundary = BOUNDARY.replace("ENABLED", str(enabled).lower()).replace("TARGET", target).replace("PARAMETER", parameter) if block else ""
     text = CONFIG.replace("BOUNDARY\n", boundary).replace("OUT", str(tmp_path / "results")).replace("NAME2", "noisy_fog")
     path = tmp_path / "exp.yaml"

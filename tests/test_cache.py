@@ -19,6 +19,8 @@ import cv2
 import numpy as np
 import pytest
 
+from pytest_sal.cli.main import main
+from pytest_sal.store.cache_keys import cache_key
 from pytest_sal.store.trial_cache import (
     CacheError,
     CacheWarning,
@@ -26,8 +28,6 @@ from pytest_sal.store.trial_cache import (
     default_cache_dir,
     parse_size,
 )
-from pytest_sal.store.cache_keys import cache_key
-from pytest_sal.cli.main import main
 from sal_adapters import SalError, open_dataset, write_sequence
 
 REPO = Path(__file__).resolve().parents[1]
@@ -58,8 +58,14 @@ def test_key_is_sha256_of_documented_canonical_json() -> None:
 
 def test_key_is_stable_across_processes() -> None:
     code = "import json,sys; from pytest_sal.store.cache_keys import cache_key; print(cache_key(**json.loads(sys.argv[1])))"
-    out = subprocess.run([sys.executable, "-c", code, json.dumps(BASE)], capture_output=True, text=True, check=True, cwd=REPO,
-                         env={**os.environ, "PYTHONHASHSEED": "123"})
+    out = subprocess.run(
+        [sys.executable, "-c", code, json.dumps(BASE)],
+        capture_output=True,
+        text=True,
+        check=True,
+        cwd=REPO,
+        env={**os.environ, "PYTHONHASHSEED": "123"},
+    )
     assert out.stdout.strip() == cache_key(**BASE)
 
 
@@ -313,7 +319,10 @@ def _child(tmp_path: Path, root: Path, key: str, mode: str) -> tuple[subprocess.
     signal_file = tmp_path / f"{mode}.signal"
     proc = subprocess.Popen(
         [sys.executable, "-c", CHILD, str(root), key, mode, str(signal_file)],
-        cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
         env={**os.environ, "PYTHONPATH": str(REPO)},
     )
     return proc, signal_file

@@ -18,11 +18,11 @@ import pytest
 from faults import refuse_writes_under, stamps
 
 from pytest_sal import tracking_rate
-from pytest_sal.store.trial_cache import CacheWarning, ContentCache
-from pytest_sal.store.cache_keys import cache_key
 from pytest_sal.engine.requirements import Requirement
-from pytest_sal.testing import FakeSlam
 from pytest_sal.engine.trial_runner import TrialRunner, cached_sequence
+from pytest_sal.store.cache_keys import cache_key
+from pytest_sal.store.trial_cache import CacheWarning, ContentCache
+from pytest_sal.testing import FakeSlam
 from sal_adapters import Sequence, open_dataset
 from sal_modules import create, fog, perturb
 from sal_wrappers import RunResult
@@ -39,7 +39,9 @@ def quiet_machine(monkeypatch: pytest.MonkeyPatch) -> None:
 def runner(tmp_path: Path, system: FakeSlam) -> TrialRunner:
     dataset = open_dataset("synthetic", scene="indoor", frames=8, sensor="rgbd")
     requirement = Requirement.build([tracking_rate >= 0.5, fog.visibility_m >= 25])
-    return TrialRunner(dataset, fog.visibility_m.ref(), system, requirement, cache=ContentCache(tmp_path / "cache"), workdir=tmp_path / "work")
+    return TrialRunner(
+        dataset, fog.visibility_m.ref(), system, requirement, cache=ContentCache(tmp_path / "cache"), workdir=tmp_path / "work"
+    )
 
 
 def cache_warnings(fn: Callable[[], Any]) -> tuple[Any, list[str]]:
@@ -142,8 +144,13 @@ def test_a_damaged_cached_frame_is_rendered_again(tmp_path: Path, damage: str) -
         (files.parent / "manifest.json").unlink()
     copy, messages = cache_warnings(lambda: cached_sequence(foggy, ContentCache(tmp_path / "cache")))  # the next session
     assert len(messages) == 1 and messages[0].startswith(f"{files.parent}: bad cache entry, removed and computed again: ")
-    expected = {"truncated": "bytes, manifest.json says", "same size, other bytes": "content differs from its SHA-256", "removed": "is missing",
-                "added": "data/stray.png is not in manifest.json", "no manifest": "no manifest.json"}[damage]
+    expected = {
+        "truncated": "bytes, manifest.json says",
+        "same size, other bytes": "content differs from its SHA-256",
+        "removed": "is missing",
+        "added": "data/stray.png is not in manifest.json",
+        "no manifest": "no manifest.json",
+    }[damage]
     assert expected in messages[0]
     assert_same_frames(copy, foggy)
     assert (files.parent / "manifest.json").read_bytes() == manifest  # the same files, byte for byte
@@ -183,7 +190,10 @@ def test_a_read_only_cache_serves_its_entries_and_stores_nothing(tmp_path: Path,
     assert hit == ({"ate": 0.5}, True) and folder_hit == (cache.path(cache_key(n=2), folder=True), True)
     assert miss == ({"ate": 0.3}, False) and other_miss == ({"ate": 0.4}, False) and bad == ({"ate": 0.95}, False)
     assert folder_miss[1] is False and (folder_miss[0] / "g.png").read_bytes() == b"new" and root not in folder_miss[0].parents
-    assert messages[0] == f"the cache at {root} is read-only (Read-only file system): the entries it holds are used, new results are computed and not stored"
+    assert (
+        messages[0]
+        == f"the cache at {root} is read-only (Read-only file system): the entries it holds are used, new results are computed and not stored"
+    )
     assert len(messages) == 2 and messages[1].startswith(f"{cache.path(cache_key(n=9))}: bad cache entry, ignored (the cache is read-only)")
     assert cache.read_only == "Read-only file system" and cache.get(cache_key(n=1)) == {"ate": 0.5}
     assert stamps(root) == before  # nothing written, removed or touched
@@ -208,11 +218,27 @@ class Failing(FakeSlam):
 TIMEOUT = "timed out after 60 s and was killed"
 BUSY = {"loadavg": [7.9, 6.0, 4.0], "cpus": 2, "usable_cpus": 2}
 FAILURES: dict[str, tuple[dict[str, Any] | None, dict[str, Any], str | None]] = {
-    "timeout, starved": ({"failure": TIMEOUT, "exit_status": -9, "fell_behind": True}, QUIET, "timed out while starved: it fell behind the sensor clock"),
-    "timeout, busy machine": ({"failure": TIMEOUT, "exit_status": -9}, BUSY, "timed out on a busy machine: load average 7.9 on 2 cores when it started"),
+    "timeout, starved": (
+        {"failure": TIMEOUT, "exit_status": -9, "fell_behind": True},
+        QUIET,
+        "timed out while starved: it fell behind the sensor clock",
+    ),
+    "timeout, busy machine": (
+        {"failure": TIMEOUT, "exit_status": -9},
+        BUSY,
+        "timed out on a busy machine: load average 7.9 on 2 cores when it started",
+    ),
     "timeout, quiet machine": ({"failure": TIMEOUT, "exit_status": -9}, QUIET, None),
-    "SIGKILL, no timeout": ({"failure": "killed by SIGKILL (killed)", "exit_status": -signal.SIGKILL}, QUIET, "killed by SIGKILL without a timeout"),
-    "MemoryError in the child": ({"failure": "exit status 1", "exit_status": 1, "log_tail": "  ...\nMemoryError"}, QUIET, "ran out of memory"),
+    "SIGKILL, no timeout": (
+        {"failure": "killed by SIGKILL (killed)", "exit_status": -signal.SIGKILL},
+        QUIET,
+        "killed by SIGKILL without a timeout",
+    ),
+    "MemoryError in the child": (
+        {"failure": "exit status 1", "exit_status": 1, "log_tail": "  ...\nMemoryError"},
+        QUIET,
+        "ran out of memory",
+    ),
     "MemoryError in process": (None, QUIET, "ran out of memory"),
     "segfault": ({"failure": "killed by SIGSEGV (segmentation fault)", "exit_status": -signal.SIGSEGV}, QUIET, None),
 }
@@ -233,4 +259,3 @@ def test_a_failure_the_machine_decided_is_not_cached(tmp_path: Path, monkeypatch
     assert first.cache.path(first.key(40.0, 0)).exists() == (reason is None)
     again = runner(tmp_path, Failing(how, calls_file=str(log))).evaluate(40.0)
     assert calls(log) == (2 if reason else 1) and again.cached == (reason is None)  # the next session runs it again
-

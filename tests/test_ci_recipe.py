@@ -48,7 +48,7 @@ tracked = [pose for frame, pose in zip(rows("rgb.txt"), rows("groundtruth.txt"))
 output.write_text("".join(pose + "\\n" for pose in tracked))
 '''
 
-CONFTEST = '''import sys
+CONFTEST = """import sys
 from pathlib import Path
 
 import pytest
@@ -64,9 +64,9 @@ def sal_system():
     program = Path(__file__).with_name("contrast_slam.py")
     return sal_wrappers.create("command", argv=[sys.executable, str(program), "{sequence}", "{output}"],
                                layout="tum", sensor="mono", name="contrast", deterministic=True)
-'''
+"""
 
-TESTS = '''import pytest_sal as sal
+TESTS = """import pytest_sal as sal
 from pytest_sal import tracking_rate
 from sal_modules import fog
 
@@ -74,7 +74,7 @@ from sal_modules import fog
 @sal.require(tracking_rate >= 0.9, fog.visibility_m >= 30, tolerance=5, search_range=(10, 30))
 def test_fog(sal_outcome):
     pass
-'''
+"""
 
 # Contrast thresholds: the second-lowest contrast of the 10 fogged frames (tracking_rate 0.9)
 # crosses 5 near 16 m of visibility (bisection of 10-30 m within 5 m: boundary 15-20 m), 9 near
@@ -191,18 +191,28 @@ def test_workflows_call_the_gate_in_each_mode_and_keep_its_folders() -> None:
     restored, saved = (options for _, options in history)
     assert saved["key"].startswith(restored["restore-keys"]) and saved["key"] == restored["key"]  # restored by prefix only
     assert [action for action, options, _ in uses if options.get("path") == CACHE] == ["actions/cache/restore", "actions/cache/save"]
-    assert ("actions/upload-artifact", "always()") in [(action, condition) for action, options, condition in uses if options.get("path") == OUT + "/"]
-    history_saved_when = next(condition for action, options, condition in uses if action == "actions/cache/save" and options["path"] == HISTORY)
+    assert ("actions/upload-artifact", "always()") in [
+        (action, condition) for action, options, condition in uses if options.get("path") == OUT + "/"
+    ]
+    history_saved_when = next(
+        condition for action, options, condition in uses if action == "actions/cache/save" and options["path"] == HISTORY
+    )
     assert "steps.gate-main.outcome" in history_saved_when  # only main saves the baseline
 
     gitlab = yaml.safe_load((CI / "gitlab-ci.yml").read_text())["sal-gate"]
     assert {gitlab["variables"][v] for v in ("SAL_HISTORY", "SAL_CACHE", "SAL_OUT")} == {HISTORY, CACHE, OUT}
-    assert [rule["if"] for rule in gitlab["rules"]] == ["$CI_COMMIT_BRANCH == $CI_DEFAULT_BRANCH", '$CI_PIPELINE_SOURCE == "merge_request_event"']
+    assert [rule["if"] for rule in gitlab["rules"]] == [
+        "$CI_COMMIT_BRANCH == $CI_DEFAULT_BRANCH",
+        '$CI_PIPELINE_SOURCE == "merge_request_event"',
+    ]
     script = "\n".join(gitlab["script"])
     merge_request, _, default_branch = script.partition("else")
     assert "merge_request_event" in merge_request and f"bash {GATE_CALL} pr" in merge_request and f"bash {GATE_CALL} main" in default_branch
     download = "\n".join(gitlab["before_script"])
-    assert "jobs/artifacts/$CI_DEFAULT_BRANCH/download?job=$CI_JOB_NAME" in download and 'unzip -q -o main-artifacts.zip "$SAL_HISTORY/*"' in download
+    assert (
+        "jobs/artifacts/$CI_DEFAULT_BRANCH/download?job=$CI_JOB_NAME" in download
+        and 'unzip -q -o main-artifacts.zip "$SAL_HISTORY/*"' in download
+    )
     assert gitlab["cache"]["paths"] == [CACHE + "/"] and gitlab["cache"]["when"] == "always"
     assert gitlab["artifacts"]["paths"] == [OUT + "/", HISTORY + "/"] and gitlab["artifacts"]["reports"]["junit"] == OUT + "/junit.xml"
     assert gitlab["artifacts"]["when"] == "always" and "expire_in" in gitlab["artifacts"]

@@ -56,8 +56,14 @@ def test_dataset_list_names_every_builtin_kind(capsys):
     ("args", "message"),
     [
         (["dataset", "info", "kitti", "/no/such/folder"], "sal: error: /no/such/folder: kitti dataset folder not found"),
-        (["dataset", "info", "nosuchkind", "/tmp"], "sal: error: unknown dataset kind 'nosuchkind'; known: euroc, folder, kitti, synthetic, tum (entry-point group 'sal.datasets')"),
-        (["dataset", "info", "kitti", "/tmp", "-o", "colour=true"], "sal: error: unknown option 'colour' for dataset kind 'kitti'; allowed: start, max_frames, sequence, stereo, color"),
+        (
+            ["dataset", "info", "nosuchkind", "/tmp"],
+            "sal: error: unknown dataset kind 'nosuchkind'; known: euroc, folder, kitti, synthetic, tum (entry-point group 'sal.datasets')",
+        ),
+        (
+            ["dataset", "info", "kitti", "/tmp", "-o", "colour=true"],
+            "sal: error: unknown option 'colour' for dataset kind 'kitti'; allowed: start, max_frames, sequence, stereo, color",
+        ),
     ],
 )
 def test_bad_input_is_one_line_without_traceback(args, message):

@@ -19,7 +19,7 @@ from sal_wrappers import RunResult, SlamSystemError, TrackState, create
 OK, LOST, NI = TrackState.OK, TrackState.LOST, TrackState.NOT_INITIALISED
 NOISE = 0.001  # the fake program adds NOISE * frame position to x
 
-FAKE_SLAM = r'''
+FAKE_SLAM = r"""
 import argparse, json, math, os, sys
 from pathlib import Path
 
@@ -122,7 +122,7 @@ with open(a.out, "w") as fh:
     else:
         sys.exit(f"unknown format {f}")
 print(f"fake_slam: wrote {len(out)} poses to {a.out}")
-'''
+"""
 
 SCRIPTS = {
     "fake_slam.py": FAKE_SLAM,
@@ -239,7 +239,9 @@ def test_kitti_formats(scripts, urban, tmp_path, fmt, extra, positions):
 
 
 def test_kitti_without_times_for_part_of_the_frames_is_unparsable(scripts, urban, tmp_path):
-    system = create("command", argv=fake(scripts, "--gt", "kitti", "--format", "kitti12", "--first", "3"), output_format="kitti", layout="kitti")
+    system = create(
+        "command", argv=fake(scripts, "--gt", "kitti", "--format", "kitti12", "--first", "3"), output_format="kitti", layout="kitti"
+    )
     result = system.run(urban, tmp_path / "w", timeout=60)
     assert not result.ok and result.exit_status == 0
     assert "unparsable output" in result.failure and "7 poses" in result.failure and "{output_times}" in result.failure
@@ -285,7 +287,9 @@ def test_wrong_time_unit_matches_no_frame(scripts, short, tmp_path):
 
 # -- failures of the program come back in words --------------------------------------------------------
 def test_segfault(scripts, tiny, tmp_path):
-    result = create("command", argv=[sys.executable, str(scripts / "segfault.py")], sensor="mono", layout="folder").run(tiny, tmp_path / "w", timeout=60)
+    result = create("command", argv=[sys.executable, str(scripts / "segfault.py")], sensor="mono", layout="folder").run(
+        tiny, tmp_path / "w", timeout=60
+    )
     assert result.exit_status == -11
     assert "SIGSEGV" in result.failure and "segmentation fault" in result.failure
     assert "about to crash" in result.log_tail
@@ -293,7 +297,9 @@ def test_segfault(scripts, tiny, tmp_path):
 
 
 def test_exit_255(scripts, tiny, tmp_path):
-    result = create("command", argv=[sys.executable, str(scripts / "exit255.py")], sensor="mono", layout="folder").run(tiny, tmp_path / "w", timeout=60)
+    result = create("command", argv=[sys.executable, str(scripts / "exit255.py")], sensor="mono", layout="folder").run(
+        tiny, tmp_path / "w", timeout=60
+    )
     assert result.exit_status == 255 and result.failure.startswith("exit status 255")
     assert "Failed to open settings file" in result.log_tail
     assert result.log_path == tmp_path / "w" / "run.log"
@@ -336,20 +342,31 @@ def assert_gone(pid: int) -> None:
 
 
 def test_garbage_output(scripts, tiny, tmp_path):
-    result = create("command", argv=[sys.executable, str(scripts / "garbage.py"), "{output}"], sensor="mono", layout="folder").run(tiny, tmp_path / "w", timeout=30)
+    result = create("command", argv=[sys.executable, str(scripts / "garbage.py"), "{output}"], sensor="mono", layout="folder").run(
+        tiny, tmp_path / "w", timeout=30
+    )
     out = tmp_path.resolve() / "w" / "trajectory.txt"
     assert result.exit_status == 0
     assert result.failure.startswith(f"unparsable output: {out}:2: expected 8 values")
 
 
 def test_garbage_json(scripts, tiny, tmp_path):
-    system = create("command", argv=[sys.executable, str(scripts / "garbage.py"), "{output}"], output="out.json", output_format="json", sensor="mono", layout="folder")
+    system = create(
+        "command",
+        argv=[sys.executable, str(scripts / "garbage.py"), "{output}"],
+        output="out.json",
+        output_format="json",
+        sensor="mono",
+        layout="folder",
+    )
     result = system.run(tiny, tmp_path / "w", timeout=30)
     assert "unparsable output" in result.failure and "out.json:1: not valid JSON" in result.failure
 
 
 def test_missing_output(scripts, tiny, tmp_path):
-    result = create("command", argv=[sys.executable, str(scripts / "nothing.py")], sensor="mono", layout="folder").run(tiny, tmp_path / "w", timeout=30)
+    result = create("command", argv=[sys.executable, str(scripts / "nothing.py")], sensor="mono", layout="folder").run(
+        tiny, tmp_path / "w", timeout=30
+    )
     assert result.exit_status == 0
     assert result.failure.startswith("no trajectory written:") and "trajectory.txt not found" in result.failure
 
@@ -358,7 +375,14 @@ def test_stale_output_outside_workdir_is_not_taken(scripts, tiny, tmp_path):
     cwd = tmp_path / "checkout"
     cwd.mkdir()
     (cwd / "CameraTrajectory.txt").write_text("0.0 0 0 0 0 0 0 1\n")
-    system = create("command", argv=[sys.executable, str(scripts / "nothing.py")], cwd=str(cwd), output="CameraTrajectory.txt", sensor="mono", layout="folder")
+    system = create(
+        "command",
+        argv=[sys.executable, str(scripts / "nothing.py")],
+        cwd=str(cwd),
+        output="CameraTrajectory.txt",
+        sensor="mono",
+        layout="folder",
+    )
     result = system.run(tiny, tmp_path / "w", timeout=30)
     assert "is left from before this run" in result.failure
     assert result.info["cwd"] == str(cwd)
@@ -385,7 +409,9 @@ def test_prefix_and_env(scripts, short, tmp_path):
 
 def test_settings_template_is_rendered(scripts, short, tmp_path):
     template = tmp_path / "Synthetic.yaml"
-    template.write_text("%YAML:1.0\nCamera.fx: {camera_fx}\nCamera.fps: {fps}\nsize: {camera_width}x{camera_height}\nbf: {camera_bf}\nliteral: {{x}}\n")
+    template.write_text(
+        "%YAML:1.0\nCamera.fx: {camera_fx}\nCamera.fps: {fps}\nsize: {camera_width}x{camera_height}\nbf: {camera_bf}\nliteral: {{x}}\n"
+    )
     system = create("command", argv=fake(scripts, "--need-file", "{settings}"), settings=str(template), sensor="mono", layout="tum")
     result = system.run(short, tmp_path / "w", timeout=60)
     assert result.ok, result.failure
@@ -429,7 +455,10 @@ def test_exit_127_from_a_prefix(tiny, tmp_path):
     [
         ({"argv": ["slam", "{sequnce}"]}, r"unknown placeholder \{sequnce\} in argv\[1\].*known: \{sequence\}, \{workdir\}"),
         ({"argv": ["slam"], "prefix": ["docker", "-v", "{wrkdir}:/w"]}, r"unknown placeholder \{wrkdir\} in prefix\[2\]"),
-        ({"argv": "slam {sequence} {output}"}, r"argv must be a list of strings, not a shell string: pass \['slam', '\{sequence\}', '\{output\}'\]"),
+        (
+            {"argv": "slam {sequence} {output}"},
+            r"argv must be a list of strings, not a shell string: pass \['slam', '\{sequence\}', '\{output\}'\]",
+        ),
         ({"argv": []}, "argv is empty"),
         ({}, "argv is required"),
         ({"argv": ["slam", 3]}, r"argv\[1\] must be a string"),
@@ -488,14 +517,23 @@ def drift_script(path: Path, drift: float) -> Path:
 
 def trial_runner(tmp_path: Path, system):
     from pytest_sal import ate_rmse
-    from pytest_sal.store.trial_cache import ContentCache
     from pytest_sal.engine.requirements import Requirement
     from pytest_sal.engine.trial_runner import TrialRunner
+    from pytest_sal.store.trial_cache import ContentCache
     from sal_modules import fog
 
     dataset = open_dataset("synthetic", scene="indoor", frames=8, sensor="rgbd")
     requirement = Requirement.build([ate_rmse < 0.5, fog.visibility_m >= 25])
-    return TrialRunner(dataset, fog.visibility_m.ref(), system, requirement, runs=1, cache=ContentCache(tmp_path / "cache"), workdir=tmp_path / "work", timeout=60)
+    return TrialRunner(
+        dataset,
+        fog.visibility_m.ref(),
+        system,
+        requirement,
+        runs=1,
+        cache=ContentCache(tmp_path / "cache"),
+        workdir=tmp_path / "work",
+        timeout=60,
+    )
 
 
 def test_editing_the_script_invalidates_cached_trials(tmp_path):
@@ -585,7 +623,9 @@ def test_the_executable_is_found_on_path_and_hashed(tmp_path):
 def test_name_is_shown_in_results_and_outcomes(scripts, tmp_path):
     from pytest_sal.engine.requirement_runner import single_outcome
 
-    system = create("command", argv=[sys.executable, str(drift_script(tmp_path / "s.py", 0.0)), "{sequence}", "{output}"], name="myslam", layout="tum")
+    system = create(
+        "command", argv=[sys.executable, str(drift_script(tmp_path / "s.py", 0.0)), "{sequence}", "{output}"], name="myslam", layout="tum"
+    )
     assert system.name == "myslam" and type(system).name == "command"
     runner = trial_runner(tmp_path, system)
     result = system.run(runner.dataset.select(range(4)), tmp_path / "w", timeout=60)

@@ -370,7 +370,9 @@ def test_decreasing_timestamps(tiny: Path) -> None:
     lines = csv.read_text().splitlines()
     lines[2], lines[3] = lines[3], lines[2]
     csv.write_text("\n".join(lines) + "\n")
-    with pytest.raises(DatasetError, match=rf"^{re.escape(str(csv))}:4: time \d+ ns is not after line 3's \d+ ns \(frame times must increase\)$"):
+    with pytest.raises(
+        DatasetError, match=rf"^{re.escape(str(csv))}:4: time \d+ ns is not after line 3's \d+ ns \(frame times must increase\)$"
+    ):
         EUROC.open(tiny)
 
 

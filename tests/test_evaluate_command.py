@@ -72,10 +72,21 @@ def write_config(tmp_path: Path, **sections: Any) -> Path:
 
 def evaluate(tmp_path: Path, slam: str = "fake", *extra: str, **sections: Any) -> int:
     calls = tmp_path / "calls.jsonl"
-    return main([
-        "evaluate", str(write_config(tmp_path, **sections)), "--slam", slam, "--runs", "2",
-        "--slam-option", "tracked=min(1, v / 20)", "--slam-option", f"calls_file={calls}", *extra,
-    ])
+    return main(
+        [
+            "evaluate",
+            str(write_config(tmp_path, **sections)),
+            "--slam",
+            slam,
+            "--runs",
+            "2",
+            "--slam-option",
+            "tracked=min(1, v / 20)",
+            "--slam-option",
+            f"calls_file={calls}",
+            *extra,
+        ]
+    )
 
 
 def read(path: Path) -> dict[str, Any]:
@@ -137,7 +148,10 @@ def test_evaluate_writes_the_paper_tree(tmp_path: Path, systems: None, capsys: p
     assert "ATE median" in out  # the final table
     # the room's 13 cm path has no segment of the devkit's 100 m: missing, with the reason
     assert summary["kitti_segments_m"] == [100, 200, 300, 400, 500, 600, 700, 800]
-    assert summary["baseline"]["t_rel"]["count"] == 0 and "too short for a segment of 100 m" in summary["baseline"]["kitti_missing"][0]["reason"]
+    assert (
+        summary["baseline"]["t_rel"]["count"] == 0
+        and "too short for a segment of 100 m" in summary["baseline"]["kitti_missing"][0]["reason"]
+    )
     assert "baseline: t_rel / r_rel missing in 2 run(s): the reference path is 0.1 m, too short for a segment of 100 m" in out
 
 

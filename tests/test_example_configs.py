@@ -186,7 +186,9 @@ def test_config_loads(name: str) -> None:
     for command in ("perturb", "evaluate", "boundary", "features"):
         assert f"#   sal {command} example_suites/configs/{name}" in text, f"{name}: header lacks the sal {command} line"
     kind = _real_kind(name)
-    assert re.search(rf"# real data: type: {kind}, path: /data/", text), f"{name}: dataset block lacks the '# real data: type: {kind}' comment"
+    assert re.search(rf"# real data: type: {kind}, path: /data/", text), (
+        f"{name}: dataset block lacks the '# real data: type: {kind}' comment"
+    )
     if name in REQUIRED:
         names = [p.name for p in config.enabled()]
         groups = _groups(config)
@@ -317,8 +319,15 @@ def mono_depth_model(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.mark.parametrize("name", NAMES)
-def test_perturb_real_data(name: str, shared_data: Path, tmp_path: Path, request: pytest.FixtureRequest,
-                           capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, record_property: Any) -> None:
+def test_perturb_real_data(
+    name: str,
+    shared_data: Path,
+    tmp_path: Path,
+    request: pytest.FixtureRequest,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    record_property: Any,
+) -> None:
     kind = _real_kind(name)
     dataset, src, pairs = _real_dataset(kind, shared_data, request)
     path = _rewrite(CONFIGS / name, tmp_path / name, tmp_path / "results", dataset)
@@ -366,7 +375,9 @@ def test_perturb_real_data(name: str, shared_data: Path, tmp_path: Path, request
             names = sorted(f.name for f in (folder / written_dir).iterdir())
             source_names = sorted(f.name for f in (src / source_dir).iterdir())
             # the dataset's own layout and file names: the first frames of the source, less the dropped ones
-            assert set(names) <= set(source_names[:n_in]), f"{pert.name}: {written_dir} holds files other than the first {n_in} of the source"
+            assert set(names) <= set(source_names[:n_in]), (
+                f"{pert.name}: {written_dir} holds files other than the first {n_in} of the source"
+            )
             assert len(names) == n_in - len(dropped)
             kept[pert.name] = names
             for file_name in names:
@@ -379,8 +390,11 @@ def test_perturb_real_data(name: str, shared_data: Path, tmp_path: Path, request
         else:
             assert not dropped
             assert diffs[pert.name] > MIN_MAD, f"{pert.name}: written frames barely differ from the originals ({diffs[pert.name]:.3f})"
-        layout = {"kitti": ["sequences/07/times.txt", "sequences/07/calib.txt"], "tum": ["rgb.txt", "depth.txt"],
-                  "euroc": [f"{EUROC_SEQ.name}/mav0/cam0/data.csv", f"{EUROC_SEQ.name}/mav0/cam1/data.csv"]}[kind]
+        layout = {
+            "kitti": ["sequences/07/times.txt", "sequences/07/calib.txt"],
+            "tum": ["rgb.txt", "depth.txt"],
+            "euroc": [f"{EUROC_SEQ.name}/mav0/cam0/data.csv", f"{EUROC_SEQ.name}/mav0/cam1/data.csv"],
+        }[kind]
         for listed in layout:
             assert (folder / listed).is_file(), f"{pert.name}: {listed} missing from the written {kind} layout"
         if kind == "tum":  # RGB-D: the depth maps travel with the perturbed colour frames

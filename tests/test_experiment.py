@@ -34,13 +34,21 @@ def base_config(tmp_path: Path, **changes: Any) -> dict[str, Any]:
             {
                 "name": "combo",
                 "type": "composite",
-                "parameters": {"modules": [{"type": "rain", "parameters": {"intensity_mm_h": 5}}, {"type": "fog", "parameters": {"visibility_m": 80}}]},
+                "parameters": {
+                    "modules": [{"type": "rain", "parameters": {"intensity_mm_h": 5}}, {"type": "fog", "parameters": {"visibility_m": 80}}]
+                },
             },
         ],
         "output": {"base_dir": str(tmp_path / "out")},
         "robustness_boundary": {
-            "enabled": True, "target_perturbation": "fog", "parameter": "visibility_m",
-            "lower_bound": 10, "upper_bound": 200, "tolerance": 5, "max_iters": 4, "ate_rmse_fail": 1.0,
+            "enabled": True,
+            "target_perturbation": "fog",
+            "parameter": "visibility_m",
+            "lower_bound": 10,
+            "upper_bound": 200,
+            "tolerance": 5,
+            "max_iters": 4,
+            "ate_rmse_fail": 1.0,
         },
     }
     config.update(changes)
@@ -102,7 +110,9 @@ def test_unknown_key_at_top_level_and_in_perturbations(tmp_path: Path) -> None:
     config = base_config(tmp_path)
     config["experiment"]["descrption"] = "x"
     assert error_of(tmp_path, config).endswith("experiment.descrption: unknown key; did you mean 'description'?")
-    assert ": slam: unknown key; known: experiment, dataset, perturbations, output, robustness_boundary" in error_of(tmp_path, base_config(tmp_path, slam={}))
+    assert ": slam: unknown key; known: experiment, dataset, perturbations, output, robustness_boundary" in error_of(
+        tmp_path, base_config(tmp_path, slam={})
+    )
     config = base_config(tmp_path)
     config["perturbations"][1]["params"] = {}
     assert "perturbations[1].params: unknown key; did you mean 'parameters'?" in error_of(tmp_path, config)
@@ -149,7 +159,10 @@ def test_out_of_range_value_names_the_path_unit_and_range(tmp_path: Path) -> Non
     )
     config = base_config(tmp_path)
     config["perturbations"][2]["parameters"]["modules"][0]["parameters"]["intensity_mm_h"] = 999
-    assert "perturbations[2].parameters.modules[0].parameters.intensity_mm_h: 999 mm/h is not valid; intensity_mm_h must be a number in 0.1 .. 300 mm/h" in error_of(tmp_path, config)
+    assert (
+        "perturbations[2].parameters.modules[0].parameters.intensity_mm_h: 999 mm/h is not valid; intensity_mm_h must be a number in 0.1 .. 300 mm/h"
+        in error_of(tmp_path, config)
+    )
 
 
 def test_missing_dataset_path_and_unknown_kind(tmp_path: Path) -> None:
@@ -163,7 +176,9 @@ def test_missing_dataset_path_and_unknown_kind(tmp_path: Path) -> None:
     config["dataset"]["options"]["scnee"] = "urban"
     assert "dataset.options.scnee: unknown option of dataset kind 'synthetic'; did you mean 'scene'?" in error_of(tmp_path, config)
     config["dataset"]["options"] = {"xyz": 1}
-    assert "dataset.options.xyz: unknown option of dataset kind 'synthetic'; known: scene, frames, seed, sensor, cache_dir" in error_of(tmp_path, config)
+    assert "dataset.options.xyz: unknown option of dataset kind 'synthetic'; known: scene, frames, seed, sensor, cache_dir" in error_of(
+        tmp_path, config
+    )
 
 
 def test_dataset_path_is_env_expanded(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -194,16 +209,27 @@ def test_robustness_boundary_checks(tmp_path: Path) -> None:
         config["robustness_boundary"].update(rb)
         return error_of(tmp_path, config)
 
-    assert "robustness_boundary.target_perturbation: 'foog' is not a perturbation of this config; did you mean 'fog'?" in with_rb(target_perturbation="foog")
-    assert "robustness_boundary.target_perturbation: 'xyz' is not a perturbation of this config; perturbations: rain, fog, combo" in with_rb(target_perturbation="xyz")
-    assert "robustness_boundary.parameter: 'heterogeneity' is not a searchable parameter of 'fog' (fog); searchable: visibility_m" in with_rb(parameter="heterogeneity")
-    assert "robustness_boundary.lower_bound: 0.5 m is not valid; visibility_m search values must be a number in 1 .. 100000 m" in with_rb(lower_bound=0.5)
+    assert "robustness_boundary.target_perturbation: 'foog' is not a perturbation of this config; did you mean 'fog'?" in with_rb(
+        target_perturbation="foog"
+    )
+    assert (
+        "robustness_boundary.target_perturbation: 'xyz' is not a perturbation of this config; perturbations: rain, fog, combo"
+        in with_rb(target_perturbation="xyz")
+    )
+    assert (
+        "robustness_boundary.parameter: 'heterogeneity' is not a searchable parameter of 'fog' (fog); searchable: visibility_m"
+        in with_rb(parameter="heterogeneity")
+    )
+    assert "robustness_boundary.lower_bound: 0.5 m is not valid; visibility_m search values must be a number in 1 .. 100000 m" in with_rb(
+        lower_bound=0.5
+    )
     assert "robustness_boundary.upper_bound: 10 must be greater than lower_bound 200" in with_rb(lower_bound=200, upper_bound=10)
     assert "robustness_boundary.tolerance: 0 is not valid" in with_rb(tolerance=0)
     assert "robustness_boundary.max_iters: 0 is not valid; must be an integer >= 1" in with_rb(max_iters=0)
     assert "robustness_boundary.ate_rmse_fail: -1 m is not valid" in with_rb(ate_rmse_fail=-1)
-    assert "robustness_boundary.parameter: composite 'combo' has no parameter 'fog.visibility'; did you mean 'fog.visibility_m'?" in with_rb(
-        target_perturbation="combo", parameter="fog.visibility"
+    assert (
+        "robustness_boundary.parameter: composite 'combo' has no parameter 'fog.visibility'; did you mean 'fog.visibility_m'?"
+        in with_rb(target_perturbation="combo", parameter="fog.visibility")
     )
     config = base_config(tmp_path)
     config["robustness_boundary"].update(target_perturbation="combo", parameter="fog.visibility_m")
@@ -321,9 +347,15 @@ def test_hostile_configs_end_in_one_short_line_quickly(tmp_path: Path) -> None:
     cases = {
         laughs + valid: "holds more than 100000 values once its YAML aliases are expanded",
         "experiment: " + "[" * 1000 + "]" * 1000 + "\n": "nested deeper than 32 levels",
-        yaml.safe_dump(base_config(tmp_path, dataset={"type": "synthetic", "options": {"frames": 2**63}})): "dataset.options.frames: 9223372036854775808 is not valid; must be a whole number in 1 .. 10000",
-        yaml.safe_dump(base_config(tmp_path, dataset={"type": "synthetic", "max_frames": 10**9})): "dataset.max_frames: 1000000000 is not valid; the limit is 1000000 frames",
-        yaml.safe_dump(base_config(tmp_path, perturbations=[{"name": f"p{i}", "type": "fog"} for i in range(300)])): "perturbations: 300 perturbations; the limit is 256",
+        yaml.safe_dump(
+            base_config(tmp_path, dataset={"type": "synthetic", "options": {"frames": 2**63}})
+        ): "dataset.options.frames: 9223372036854775808 is not valid; must be a whole number in 1 .. 10000",
+        yaml.safe_dump(
+            base_config(tmp_path, dataset={"type": "synthetic", "max_frames": 10**9})
+        ): "dataset.max_frames: 1000000000 is not valid; the limit is 1000000 frames",
+        yaml.safe_dump(
+            base_config(tmp_path, perturbations=[{"name": f"p{i}", "type": "fog"} for i in range(300)])
+        ): "perturbations: 300 perturbations; the limit is 256",
         yaml.safe_dump(base_config(tmp_path, experiment={"name": "x" * 100_000})): "experiment.name: 'xxxxxxxx",
         valid.replace("tolerance: 5", "tolerance: .nan"): "robustness_boundary.tolerance: nan is not valid; must be a number > 0",
     }
@@ -343,7 +375,10 @@ def test_hostile_configs_end_in_one_short_line_quickly(tmp_path: Path) -> None:
         ("dataset.options.cache_dir", lambda c: c["dataset"]["options"].update(cache_dir="\0")),
         ("dataset.options.timestamps", lambda c: c.update(dataset={"type": "folder", "path": ".", "options": {"timestamps": "t\0.txt"}})),
         ("dataset.options.groundtruth", lambda c: c.update(dataset={"type": "euroc", "path": ".", "options": {"groundtruth": "gt\0"}})),
-        ("perturbations[0].parameters.model", lambda c: c["perturbations"].insert(0, {"name": "n", "type": "night", "parameters": {"model": "m\0.onnx"}})),
+        (
+            "perturbations[0].parameters.model",
+            lambda c: c["perturbations"].insert(0, {"name": "n", "type": "night", "parameters": {"model": "m\0.onnx"}}),
+        ),
     ],
 )
 def test_a_nul_character_in_any_path_is_refused_by_its_key(tmp_path: Path, where: str, change: Any) -> None:
@@ -357,7 +392,9 @@ def test_a_path_too_long_for_the_file_system_is_refused_by_its_key(tmp_path: Pat
     config = base_config(tmp_path)
     config["output"]["base_dir"] = "x" * 300
     assert "output.base_dir: 'xxx" in error_of(tmp_path, config)
-    assert "is too long (300 bytes, a name of 300); a path may have at most 4096 bytes and each name in it 255" in error_of(tmp_path, config)
+    assert "is too long (300 bytes, a name of 300); a path may have at most 4096 bytes and each name in it 255" in error_of(
+        tmp_path, config
+    )
 
 
 @pytest.mark.parametrize(
@@ -369,16 +406,40 @@ def test_a_path_too_long_for_the_file_system_is_refused_by_its_key(tmp_path: Pat
         ("experiment: !!timestamp x\n", "exp.yaml:1: YAML syntax error: 'x' is not a valid timestamp value"),
         ("experiment: !!bool maybe\n", "exp.yaml:1: YAML syntax error: 'maybe' is not a valid bool value"),
         ("experiment:\n  ? [a]\n  : 1\n", "exp.yaml:2: YAML syntax error: a key cannot be a list"),
-        ("experiment:\n  name: \x00\n", "exp.yaml:2: YAML syntax error: character #x0000 is not allowed (special characters are not allowed)"),
+        (
+            "experiment:\n  name: \x00\n",
+            "exp.yaml:2: YAML syntax error: character #x0000 is not allowed (special characters are not allowed)",
+        ),
         ("experiment: *" + "a" * 500 + "\n", "exp.yaml:1: YAML syntax error: found undefined alias 'aaa"),
         ('experiment: {name: e}\ndataset: {type: synthetic}\n"a\\nb\\x1b": 1\n', "exp.yaml: 'a\\nb\\x1b': unknown key; known: experiment,"),
-        ("experiment: {name: e}\ndataset: {type: synthetic, " + "x" * 300 + ": 1}\n", "exp.yaml: dataset.'xxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxx...: unknown key"),
-        ("experiment: {name: e}\ndataset: {type: kitti, path: ., sequence: .inf}\n", "dataset.sequence: inf is not valid; must be a string or null"),
-        ("experiment: {name: e}\ndataset: {type: folder, path: ., options: {fps: [30]}}\n", "dataset.options.fps: [30] is not valid; must be a number or null"),
-        ("experiment: {name: e}\ndataset: {type: folder, path: ., options: {fps: .inf}}\n", "dataset.options.fps: inf is not valid; must be a number or null"),
-        ("experiment: {name: e}\ndataset: {type: synthetic, options: {scene: {a: 1}}}\n", "dataset.options.scene: {'a': 1} is not valid; must be a string"),
-        ("experiment: {name: e}\ndataset: {type: tum, path: ., options: {intrinsics: [1, 2]}}\n", "dataset.options.intrinsics: [1, 2] is not valid; must be a list of 4 numbers, a string or null"),
-        ("experiment: {name: e}\ndataset: {type: synthetic, options: {frames: 1000000}}\n", "dataset.options.frames: 1000000 is not valid; must be a whole number in 1 .. 10000"),
+        (
+            "experiment: {name: e}\ndataset: {type: synthetic, " + "x" * 300 + ": 1}\n",
+            "exp.yaml: dataset.'xxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxx...: unknown key",
+        ),
+        (
+            "experiment: {name: e}\ndataset: {type: kitti, path: ., sequence: .inf}\n",
+            "dataset.sequence: inf is not valid; must be a string or null",
+        ),
+        (
+            "experiment: {name: e}\ndataset: {type: folder, path: ., options: {fps: [30]}}\n",
+            "dataset.options.fps: [30] is not valid; must be a number or null",
+        ),
+        (
+            "experiment: {name: e}\ndataset: {type: folder, path: ., options: {fps: .inf}}\n",
+            "dataset.options.fps: inf is not valid; must be a number or null",
+        ),
+        (
+            "experiment: {name: e}\ndataset: {type: synthetic, options: {scene: {a: 1}}}\n",
+            "dataset.options.scene: {'a': 1} is not valid; must be a string",
+        ),
+        (
+            "experiment: {name: e}\ndataset: {type: tum, path: ., options: {intrinsics: [1, 2]}}\n",
+            "dataset.options.intrinsics: [1, 2] is not valid; must be a list of 4 numbers, a string or null",
+        ),
+        (
+            "experiment: {name: e}\ndataset: {type: synthetic, options: {frames: 1000000}}\n",
+            "dataset.options.frames: 1000000 is not valid; must be a whole number in 1 .. 10000",
+        ),
     ],
 )
 def test_yaml_python_cannot_hold_and_wrong_option_types_are_one_line(tmp_path: Path, text: str, message: str) -> None:

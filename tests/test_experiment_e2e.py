@@ -41,12 +41,12 @@ import numpy as np
 import pytest
 import yaml
 
-from pytest_sal.cli.boundary import TRACKING_FAIL_RATE, linear_sweep_trials
-from pytest_sal.cli.main import main
-from pytest_sal.cli.evaluate import SUMMARY_METRICS
-from pytest_sal.experiment.config import build_modules, build_sequence, load_config
 from pytest_sal.analysis.metrics import ate, rpe
+from pytest_sal.cli.boundary import TRACKING_FAIL_RATE, linear_sweep_trials
+from pytest_sal.cli.evaluate import SUMMARY_METRICS
+from pytest_sal.cli.main import main
 from pytest_sal.engine.boundary_search import TERMINATIONS
+from pytest_sal.experiment.config import build_modules, build_sequence, load_config
 from sal_adapters import open_dataset
 from sal_adapters.trajectory import Trajectory
 from sal_modules import perturb
@@ -314,7 +314,12 @@ def test_evaluate_writes_the_paper_tree(
                     assert pair["difference"] == pytest.approx(rec[metric] - baseline[metric])
             assert vs["baseline_ok"] is True and vs["baseline_failure"] is None
             assert vs["perturbed_ok"] is (rec["failure"] is None) and vs["perturbed_failure"] == rec["failure"]
-            assert vs["frames"] == {"baseline": FRAMES, "perturbed": FRAMES, "tracked_baseline": FRAMES, "tracked_perturbed": rec["tracked"]}
+            assert vs["frames"] == {
+                "baseline": FRAMES,
+                "perturbed": FRAMES,
+                "tracked_baseline": FRAMES,
+                "tracked_perturbed": rec["tracked"],
+            }
             same = vs["baseline_on_tracked_frames"]
             if p == FAILING:
                 assert same["ate_rmse"] is None and same["reason"] == "this run has no trajectory"
@@ -403,9 +408,15 @@ def test_boundary_brackets_the_fog_failure_and_a_rerun_reads_the_cache(
 
     assert summary["system"] == system and summary["parameter"] == "fog.visibility_m" and summary["unit"] == "m"
     assert summary["worse"] == "lower" and summary["edge"] == BOUNDARY["upper"]
-    assert summary["requirement"] == f"ate_rmse < {BOUNDARY['ate_rmse_fail']:g} m and tracking_rate >= 0.5 wherever fog.visibility_m >= {BOUNDARY['upper']} m"
+    assert (
+        summary["requirement"]
+        == f"ate_rmse < {BOUNDARY['ate_rmse_fail']:g} m and tracking_rate >= 0.5 wherever fog.visibility_m >= {BOUNDARY['upper']} m"
+    )
     assert (summary["lower_bound"], summary["upper_bound"], summary["tolerance"], summary["max_iters"]) == (
-        BOUNDARY["lower"], BOUNDARY["upper"], BOUNDARY["tolerance"], BOUNDARY["max_iters"]
+        BOUNDARY["lower"],
+        BOUNDARY["upper"],
+        BOUNDARY["tolerance"],
+        BOUNDARY["max_iters"],
     )
     assert summary["seed"] == SEED and summary["dataset"] == "synthetic/urban-seed0"
     assert summary["linear_sweep_trials"] == linear_sweep_trials(BOUNDARY["lower"], BOUNDARY["upper"], BOUNDARY["tolerance"]) == 101

@@ -160,10 +160,50 @@ def workdir(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
 # ------------------------------------------------------------------------------ values
 
 NASTY_TEXT = [
-    "", " ", "a\0b", "\0", "name\n", "\n", "\r\n", "\t", "\x1b[31m", "\x7f", "\x85", "\u2028", "\ufeff", "\ud800",
-    "\U0001f600" * 30, "é" * 200, "x" * 300, "x" * 5000, "a/" * 3000, "../escape", "/", ".", "..", "~", "~nobody/x",
-    "$HOME", "${UNDEFINED_SAL_VARIABLE}/x", "baseline", "none", "composite", "synthetic", "fog", "null", "true",
-    "1e400", "0x10", "<script>", "'", '"', "\\", "%s{}", "model.onnx", "/dev/zero", "/proc/self/mem",
+    "",
+    " ",
+    "a\0b",
+    "\0",
+    "name\n",
+    "\n",
+    "\r\n",
+    "\t",
+    "\x1b[31m",
+    "\x7f",
+    "\x85",
+    "\u2028",
+    "\ufeff",
+    "\ud800",
+    "\U0001f600" * 30,
+    "é" * 200,
+    "x" * 300,
+    "x" * 5000,
+    "a/" * 3000,
+    "../escape",
+    "/",
+    ".",
+    "..",
+    "~",
+    "~nobody/x",
+    "$HOME",
+    "${UNDEFINED_SAL_VARIABLE}/x",
+    "baseline",
+    "none",
+    "composite",
+    "synthetic",
+    "fog",
+    "null",
+    "true",
+    "1e400",
+    "0x10",
+    "<script>",
+    "'",
+    '"',
+    "\\",
+    "%s{}",
+    "model.onnx",
+    "/dev/zero",
+    "/proc/self/mem",
 ]
 numbers = st.one_of(
     st.integers(),
@@ -198,7 +238,9 @@ SCHEMA_KEYS = sorted(
     | {param for kind in MODULES for param in module_class(kind).parameters()}
 )
 keys = st.one_of(st.sampled_from(SCHEMA_KEYS), texts, st.integers(), st.booleans(), st.none())
-values = st.recursive(scalars, lambda inner: st.one_of(st.lists(inner, max_size=4), st.dictionaries(keys, inner, max_size=4)), max_leaves=12)
+values = st.recursive(
+    scalars, lambda inner: st.one_of(st.lists(inner, max_size=4), st.dictionaries(keys, inner, max_size=4)), max_leaves=12
+)
 
 
 @st.composite
@@ -246,9 +288,14 @@ def boundaries(draw: st.DrawFn, entries: list[dict[str, Any]]) -> dict[str, Any]
     if space.domain == "integer":
         lower, upper = int(np.floor(lower)), int(np.floor(lower)) + 1
     return {
-        "enabled": draw(st.booleans()), "target_perturbation": name, "parameter": address,
-        "lower_bound": lower, "upper_bound": upper, "tolerance": draw(st.floats(0.01, 10)),
-        "max_iters": draw(st.integers(1, 12)), "ate_rmse_fail": draw(st.floats(0.01, 10)),
+        "enabled": draw(st.booleans()),
+        "target_perturbation": name,
+        "parameter": address,
+        "lower_bound": lower,
+        "upper_bound": upper,
+        "tolerance": draw(st.floats(0.01, 10)),
+        "max_iters": draw(st.integers(1, 12)),
+        "ate_rmse_fail": draw(st.floats(0.01, 10)),
     }
 
 
@@ -324,12 +371,69 @@ def schema_configs(draw: st.DrawFn) -> bytes:
 
 SEEDS = sorted(p.read_text() for p in EXAMPLES.glob("*.yaml"))
 SNIPPETS = [
-    "&a ", "*a", "<<: *a\n", "<<: [*a, *a]\n", "!!python/object/apply:os.system ['true']", "!!binary ", "!!timestamp 2001-02-30",
-    "2001-02-30", "!!float x", "!!int x", "!!bool maybe", "!!set {a}", "!!omap [a]", "!!pairs [a]", "? [a]\n: 1\n", "? {a: 1}\n: 1\n",
-    "{", "[", "]", "}", ": ", "- ", "\t", "---\n", "...\n", "%YAML 1.1\n", "%TAG ! tag:x,2000:\n", "'", '"', "#", "\\", "|\n", ">-\n",
-    "\x00", "\x1b", "\ufeff", "\r", "\x85", "\u2028", "1" * 5000, ".nan", ".inf", "-.inf", "0x" + "f" * 40, "0o777", "1_000",
-    "0b101", "1:20:30", "2001-12-14t21:59:43.10-05:00", "~", "null", "yes", "on", "=", "!!str", "!<tag:yaml.org,2002:str>",
-    "!local ", "&anchor\n", "*undefined", "\"a\\0b\"", "\"\\ud800\"", "\"\\x1b[2J\"", "\"" + "x" * 400 + "\"",
+    "&a ",
+    "*a",
+    "<<: *a\n",
+    "<<: [*a, *a]\n",
+    "!!python/object/apply:os.system ['true']",
+    "!!binary ",
+    "!!timestamp 2001-02-30",
+    "2001-02-30",
+    "!!float x",
+    "!!int x",
+    "!!bool maybe",
+    "!!set {a}",
+    "!!omap [a]",
+    "!!pairs [a]",
+    "? [a]\n: 1\n",
+    "? {a: 1}\n: 1\n",
+    "{",
+    "[",
+    "]",
+    "}",
+    ": ",
+    "- ",
+    "\t",
+    "---\n",
+    "...\n",
+    "%YAML 1.1\n",
+    "%TAG ! tag:x,2000:\n",
+    "'",
+    '"',
+    "#",
+    "\\",
+    "|\n",
+    ">-\n",
+    "\x00",
+    "\x1b",
+    "\ufeff",
+    "\r",
+    "\x85",
+    "\u2028",
+    "1" * 5000,
+    ".nan",
+    ".inf",
+    "-.inf",
+    "0x" + "f" * 40,
+    "0o777",
+    "1_000",
+    "0b101",
+    "1:20:30",
+    "2001-12-14t21:59:43.10-05:00",
+    "~",
+    "null",
+    "yes",
+    "on",
+    "=",
+    "!!str",
+    "!<tag:yaml.org,2002:str>",
+    "!local ",
+    "&anchor\n",
+    "*undefined",
+    '"a\\0b"',
+    '"\\ud800"',
+    '"\\x1b[2J"',
+    '"' + "x" * 400 + '"',
 ]
 
 
@@ -353,7 +457,7 @@ def raw_configs(draw: st.DrawFn) -> bytes:
         elif edit == "text":
             text = text[:at] + draw(st.text(max_size=20)) + text[at:]
         elif edit == "delete":
-            text = text[:at] + text[at + draw(st.integers(1, 200)):]
+            text = text[:at] + text[at + draw(st.integers(1, 200)) :]
         elif edit == "duplicate":  # a key given twice, or a list item
             text = "".join(lines[: line + 1] + lines[line:])
         elif edit == "indent":

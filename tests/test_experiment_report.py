@@ -30,14 +30,27 @@ CONFIG = {
     "dataset": {"type": "synthetic", "max_frames": FRAMES, "options": {"scene": "urban", "frames": FRAMES}},
     "perturbations": [
         {"name": "fog", "type": "fog", "parameters": {"visibility_m": 25}},
-        {"name": "rain_soiled", "type": "composite", "parameters": {"modules": [
-            {"type": "rain", "parameters": {"intensity_mm_h": 20}},
-            {"type": "lens_soiling", "parameters": {"particles": 30}},
-        ]}},
+        {
+            "name": "rain_soiled",
+            "type": "composite",
+            "parameters": {
+                "modules": [
+                    {"type": "rain", "parameters": {"intensity_mm_h": 20}},
+                    {"type": "lens_soiling", "parameters": {"particles": 30}},
+                ]
+            },
+        },
     ],
     "robustness_boundary": {
-        "enabled": True, "name": "fog_visibility", "target_perturbation": "fog", "parameter": "visibility_m",
-        "lower_bound": 5, "upper_bound": 400, "tolerance": 20, "max_iters": 3, "ate_rmse_fail": 1.0,
+        "enabled": True,
+        "name": "fog_visibility",
+        "target_perturbation": "fog",
+        "parameter": "visibility_m",
+        "lower_bound": 5,
+        "upper_bound": 400,
+        "tolerance": 20,
+        "max_iters": 3,
+        "ate_rmse_fail": 1.0,
     },
 }
 SEQUENCES = ("baseline", "fog", "rain_soiled")
@@ -108,7 +121,9 @@ def test_example_frames_show_the_same_moment_of_every_sequence(experiment: Path,
     thumbs = {name: read_image(frames / f"{name}.png").astype(np.float64) for name in SEQUENCES}
     clean = build_sequence(load_config(experiment / "config.yaml"))
     middle = clean[FRAMES // 2].image
-    expected = cv2.resize(middle, (THUMBNAIL_WIDTH, round(middle.shape[0] * THUMBNAIL_WIDTH / middle.shape[1])), interpolation=cv2.INTER_AREA)  # by hand
+    expected = cv2.resize(
+        middle, (THUMBNAIL_WIDTH, round(middle.shape[0] * THUMBNAIL_WIDTH / middle.shape[1])), interpolation=cv2.INTER_AREA
+    )  # by hand
     assert np.array_equal(thumbs["baseline"], expected)
     # fog at 25 m visibility washes the street out: far less contrast than the clean frame
     assert thumbs["fog"].std() < 0.6 * thumbs["baseline"].std()
@@ -166,7 +181,9 @@ def test_a_folder_without_results_is_one_clear_error(tmp_path: Path, capsys: pyt
     assert main(["report", str(tmp_path / "nowhere")]) == 2
     assert f"experiment folder not found: {tmp_path / 'nowhere'}" in capsys.readouterr().err
     (tmp_path / "empty").mkdir()
-    with pytest.raises(SalError, match=r"holds no experiment results \(none of images/, slam_results/, robustness_boundary/, features/\); run sal perturb"):
+    with pytest.raises(
+        SalError, match=r"holds no experiment results \(none of images/, slam_results/, robustness_boundary/, features/\); run sal perturb"
+    ):
         write_experiment_report(tmp_path / "empty")
     assert not (tmp_path / "empty" / "report").exists()  # nothing written for a refused folder
     (tmp_path / "empty" / "images").mkdir()
@@ -178,12 +195,16 @@ def test_a_folder_without_results_is_one_clear_error(tmp_path: Path, capsys: pyt
 def test_report_on_real_kitti_frames(shared_data: Path, tmp_path: Path) -> None:
     """The example frames of a real dataset: KITTI's grey images, reopened from its own layout."""
     config = tmp_path / "kitti.yaml"
-    config.write_text(yaml.safe_dump({
-        "experiment": {"name": "kitti_soiling", "seed": 1},
-        "dataset": {"type": "kitti", "path": str(shared_data / "kitti" / "sequences" / "07"), "max_frames": 5},
-        "perturbations": [{"name": "soiling", "type": "lens_soiling", "parameters": {"particles": 200}}],
-        "output": {"base_dir": str(tmp_path / "results")},
-    }))
+    config.write_text(
+        yaml.safe_dump(
+            {
+                "experiment": {"name": "kitti_soiling", "seed": 1},
+                "dataset": {"type": "kitti", "path": str(shared_data / "kitti" / "sequences" / "07"), "max_frames": 5},
+                "perturbations": [{"name": "soiling", "type": "lens_soiling", "parameters": {"particles": 200}}],
+                "output": {"base_dir": str(tmp_path / "results")},
+            }
+        )
+    )
     assert main(["perturb", str(config), "--cache-dir", str(tmp_path / "cache")]) == 0
     page = write_experiment_report(config, warn=lambda message: pytest.fail(f"unexpected warning: {message}"))
     frames = page.parent / "assets" / "frames"
@@ -191,7 +212,7 @@ def test_report_on_real_kitti_frames(shared_data: Path, tmp_path: Path) -> None:
     middle = build_sequence(load_config(config))[2].image
     assert np.array_equal(clean, cv2.resize(middle, clean.shape[1::-1], interpolation=cv2.INTER_AREA))
     assert (clean[..., 0] == clean[..., 1]).all()  # grey KITTI, expanded to RGB
-    assert 1.0 < np.abs(soiled - clean).mean() and "no SLAM runs: run <code>sal evaluate CONFIG --slam NAME</code>" in page.read_text()
+    assert np.abs(soiled - clean).mean() > 1.0 and "no SLAM runs: run <code>sal evaluate CONFIG --slam NAME</code>" in page.read_text()
 
 
 def test_report_of_a_config_with_timestamped_folders_takes_the_newest(tmp_path: Path) -> None:

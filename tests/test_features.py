@@ -29,7 +29,9 @@ DUSTBIN = 5.0  # "no keypoint" logit
 
 
 # -- a tiny SuperPoint-shaped ONNX model -------------------------------------------------------
-def superpoint_model(path: Path, descriptor_dim: int = 16, semi_channels: int = 65, names: tuple[str, str, str] = ("image", "semi", "desc")) -> Path:
+def superpoint_model(
+    path: Path, descriptor_dim: int = 16, semi_channels: int = 65, names: tuple[str, str, str] = ("image", "semi", "desc")
+) -> Path:
     """Input ``1 x 1 x H x W``; ``semi``: an 8x8 stride-8 conv whose channel c (< 64) reads pixel
     (c // 8, c % 8) of its cell times ``GAIN`` (so a bright pixel wins its cell) and whose
     dustbin is a constant ``DUSTBIN``; ``desc``: a fixed random 8x8 stride-8 conv."""
@@ -52,7 +54,10 @@ def superpoint_model(path: Path, descriptor_dim: int = 16, semi_channels: int = 
         "tiny_superpoint",
         [helper.make_tensor_value_info(image, TensorProto.FLOAT, [1, 1, "H", "W"])],
         # descriptor output first: the extractor must tell them apart by shape, not order
-        [helper.make_tensor_value_info(desc, TensorProto.FLOAT, [1, descriptor_dim, "h", "w"]), helper.make_tensor_value_info(semi, TensorProto.FLOAT, [1, semi_channels, "h", "w"])],
+        [
+            helper.make_tensor_value_info(desc, TensorProto.FLOAT, [1, descriptor_dim, "h", "w"]),
+            helper.make_tensor_value_info(semi, TensorProto.FLOAT, [1, semi_channels, "h", "w"]),
+        ],
         initializer=inits,
     )
     model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])

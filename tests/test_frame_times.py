@@ -47,7 +47,15 @@ class Layout:
     ``(path to open, times file)``; ``header`` comment lines precede the rows; ``shown(t)`` is
     a time as written (and quoted in messages) in ``unit``."""
 
-    def __init__(self, kind: str, build: Callable[[Path, list[float]], tuple[Path, Path]], header: int = 0, unit: str = "s", shown: Callable[[float], str] = seconds, **options: object):
+    def __init__(
+        self,
+        kind: str,
+        build: Callable[[Path, list[float]], tuple[Path, Path]],
+        header: int = 0,
+        unit: str = "s",
+        shown: Callable[[float], str] = seconds,
+        **options: object,
+    ):
         self.kind, self.build, self.header, self.unit, self.shown, self.options = kind, build, header, unit, shown, options
 
 
@@ -161,7 +169,9 @@ def expected_message(layout: Layout, times: list[float], bad: int) -> str:
 
 @pytest.mark.parametrize("case", CASES)
 @pytest.mark.parametrize("name", LAYOUTS)
-def test_bad_frame_times_are_one_error_naming_file_and_line(layouts: dict[str, Layout], tmp_path: Path, capsys: pytest.CaptureFixture[str], name: str, case: str) -> None:
+def test_bad_frame_times_are_one_error_naming_file_and_line(
+    layouts: dict[str, Layout], tmp_path: Path, capsys: pytest.CaptureFixture[str], name: str, case: str
+) -> None:
     layout = layouts[name]
     times, bad = CASES[case]
     path, times_file = layout.build(tmp_path / "data", times)

@@ -15,8 +15,8 @@ from test_history import FOG, drop, fog, save
 
 from pytest_sal.cli.main import main
 from pytest_sal.history.gate import NOT_COMPARED, compare_with_baseline, space_form_problem
-from pytest_sal.history.run_history import History, machine_info, machine_text
 from pytest_sal.history.regression import BoundaryCheck
+from pytest_sal.history.run_history import History, machine_info, machine_text
 from sal_wrappers import create
 
 TEN_PERCENT = [BoundaryCheck(10.0, True)]
@@ -36,9 +36,16 @@ def test_last_skips_an_outcome_that_failed_the_gate(tmp_path: Path) -> None:
 def test_comparison_names_the_baseline_and_another_machine_or_system(tmp_path: Path) -> None:
     history = History(tmp_path / "h")
     save(history, [fog(15, 14, machine="Xeon Gold 6230 (16 cores)", system_version="orbslam3 (pyorbslam3 0.1.1) #aaaa0000")], name="main")
-    same = compare_with_baseline(fog(15, 14, machine="Xeon Gold 6230 (16 cores)", system_version="orbslam3 (pyorbslam3 0.1.1) #aaaa0000"), history, "main", TEN_PERCENT)
+    same = compare_with_baseline(
+        fog(15, 14, machine="Xeon Gold 6230 (16 cores)", system_version="orbslam3 (pyorbslam3 0.1.1) #aaaa0000"),
+        history,
+        "main",
+        TEN_PERCENT,
+    )
     assert same.comparison == "main (run 0001, commit 1a2b3c4)" and same.regression is None and same.previous.pass_value == 15
-    moved = compare_with_baseline(fog(16, 15, machine="EPYC 7763 (2 cores)", system_version="orbslam3 (pyorbslam3 0.1.1) #bbbb1111"), history, "main", TEN_PERCENT)
+    moved = compare_with_baseline(
+        fog(16, 15, machine="EPYC 7763 (2 cores)", system_version="orbslam3 (pyorbslam3 0.1.1) #bbbb1111"), history, "main", TEN_PERCENT
+    )
     assert moved.comparison == (
         "main (run 0001, commit 1a2b3c4); on another machine: baseline Xeon Gold 6230 (16 cores), this run EPYC 7763 (2 cores); "
         "system orbslam3 (pyorbslam3 0.1.1) #aaaa0000 -> orbslam3 (pyorbslam3 0.1.1) #bbbb1111"
@@ -50,13 +57,21 @@ def test_comparison_names_the_baseline_and_another_machine_or_system(tmp_path: P
 def test_nothing_to_compare_is_said_and_fails_only_when_asked(tmp_path: Path, missing: str) -> None:
     history = History(tmp_path / "h")
     nothing = compare_with_baseline(fog(15, 14), history, "main", TEN_PERCENT, missing=missing)
-    assert nothing.comparison == NOT_COMPARED + f"no run 'main' in the history {tmp_path / 'h'}: give 'last', a run number, a run name or a commit prefix (latest runs: none yet)"
+    assert (
+        nothing.comparison
+        == NOT_COMPARED
+        + f"no run 'main' in the history {tmp_path / 'h'}: give 'last', a run number, a run name or a commit prefix (latest runs: none yet)"
+    )
     save(history, [drop(30, 32)], name="main")  # a baseline without this test
     lacking = compare_with_baseline(fog(15, 14), history, "main", TEN_PERCENT, missing=missing)
     assert lacking.comparison == NOT_COMPARED + f"no outcome of this test (orbslam3 on kitti-07) in the baseline 'main' of {tmp_path / 'h'}"
     for outcome in (nothing, lacking):
         assert outcome.previous is None
-        assert (outcome.regression == f"{outcome.comparison} (--sal-compare-missing=fail)") if missing == "fail" else outcome.regression is None
+        assert (
+            (outcome.regression == f"{outcome.comparison} (--sal-compare-missing=fail)")
+            if missing == "fail"
+            else outcome.regression is None
+        )
         assert outcome.passed is (missing == "pass")
 
 
@@ -75,7 +90,10 @@ def test_sal_compare_exits_1_on_a_regression_and_0_otherwise(tmp_path: Path, cap
     rows = [line for line in out if line.startswith("tests/")]
     assert rows[0].startswith(FOG) and "REGRESSED" in rows[0] and "pass 15 -> 22 m, +47 % (worse)" in rows[0]  # regressions first
     assert "REGRESSED" not in rows[1]
-    assert f"REGRESSED {FOG}: fog.visibility_m boundary moved toward the requirement: passed down to 15 m before, now only down to 22 m (+47 %, limit 10 %)" in out
+    assert (
+        f"REGRESSED {FOG}: fog.visibility_m boundary moved toward the requirement: passed down to 15 m before, now only down to 22 m (+47 %, limit 10 %)"
+        in out
+    )
     assert out[-1] == "1 regression in 2 tests"
     assert main(["compare", "main", *common, "--fail", "boundary:10%"]) == 0  # the last run: within 10 %, a new test is listed
     out = capsys.readouterr().out

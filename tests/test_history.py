@@ -14,26 +14,37 @@ import cv2
 import numpy as np
 import pytest
 
-from pytest_sal.cli.main import main
-from pytest_sal.history.run_history import History, commit_info, machine_info, outcome_key
-from pytest_sal.history.regression import BoundaryCheck, MetricCheck, edge_trial, parse_compare_fail, regressions, warm_start
 from pytest_sal.cli.history import history_figure
+from pytest_sal.cli.main import main
 from pytest_sal.engine.outcome import Boundary, Outcome, Trial
+from pytest_sal.history.regression import BoundaryCheck, MetricCheck, edge_trial, parse_compare_fail, regressions, warm_start
+from pytest_sal.history.run_history import History, commit_info, machine_info, outcome_key
 from sal_adapters import SalError
 
 FOG = "tests/test_fog.py::test_fog_visibility"
 DROP = "tests/test_transport.py::test_frame_drop"
 
 
-def fog(pass_value: float | None, fail_value: float | None, *, edge: float = 25.0, ate: float | None = 0.3, verdict: str = "passed", **kw) -> Outcome:
+def fog(
+    pass_value: float | None, fail_value: float | None, *, edge: float = 25.0, ate: float | None = 0.3, verdict: str = "passed", **kw
+) -> Outcome:
     """fog.visibility_m gets more severe when lower; the system passed down to ``pass_value``."""
     trials = [Trial(edge, verdict == "passed", {"ate_rmse": ate, "tracking_rate": 0.97})]
     trials += [Trial(v, ok, {"ate_rmse": 0.5}) for v, ok in ((pass_value, True), (fail_value, False)) if v is not None]
     fields: dict = {
-        "test_id": FOG, "system": "orbslam3", "dataset": "kitti-07", "parameter": "fog.visibility_m", "worse": "lower",
-        "edge": edge, "requirement": "ate_rmse < 1.5 m wherever fog.visibility_m >= 25 m", "verdict": verdict,
-        "criteria": [("ate_rmse", "<", 1.5)], "envelope": ">= 25 m",
-        "boundary": Boundary(pass_value, fail_value, "m"), "termination": "tolerance", "trials": trials,
+        "test_id": FOG,
+        "system": "orbslam3",
+        "dataset": "kitti-07",
+        "parameter": "fog.visibility_m",
+        "worse": "lower",
+        "edge": edge,
+        "requirement": "ate_rmse < 1.5 m wherever fog.visibility_m >= 25 m",
+        "verdict": verdict,
+        "criteria": [("ate_rmse", "<", 1.5)],
+        "envelope": ">= 25 m",
+        "boundary": Boundary(pass_value, fail_value, "m"),
+        "termination": "tolerance",
+        "trials": trials,
     }
     return Outcome(**(fields | kw))
 
@@ -41,10 +52,18 @@ def fog(pass_value: float | None, fail_value: float | None, *, edge: float = 25.
 def drop(pass_value: float | None, fail_value: float | None, *, edge: float = 10.0, rate: float = 0.95) -> Outcome:
     """frame_drop.drop_rate gets more severe when higher; passed up to ``pass_value`` %."""
     return Outcome(
-        test_id=DROP, system="orbslam3", dataset="kitti-07", parameter="frame_drop.drop_rate", worse="higher", edge=edge,
-        requirement="tracking_rate >= 0.9 wherever frame_drop.drop_rate <= 10 %", verdict="passed",
-        criteria=[("tracking_rate", ">=", 0.9)], envelope="<= 10 %",
-        boundary=Boundary(pass_value, fail_value, "%"), termination="tolerance",
+        test_id=DROP,
+        system="orbslam3",
+        dataset="kitti-07",
+        parameter="frame_drop.drop_rate",
+        worse="higher",
+        edge=edge,
+        requirement="tracking_rate >= 0.9 wherever frame_drop.drop_rate <= 10 %",
+        verdict="passed",
+        criteria=[("tracking_rate", ">=", 0.9)],
+        envelope="<= 10 %",
+        boundary=Boundary(pass_value, fail_value, "%"),
+        termination="tolerance",
         trials=[Trial(edge, True, {"ate_rmse": 0.4, "tracking_rate": rate})],
     )
 
@@ -263,8 +282,7 @@ def test_parse_compare_fail_as_argparse_type(capsys: pytest.CaptureFixture[str])
 def test_boundary_relative_check_worse_lower() -> None:
     check = parse_compare_fail("boundary:10%")
     assert check.fails(fog(22, 20), fog(15, 14)) == (
-        "fog.visibility_m boundary moved toward the requirement: passed down to 15 m before, "
-        "now only down to 22 m (+47 %, limit 10 %)"
+        "fog.visibility_m boundary moved toward the requirement: passed down to 15 m before, now only down to 22 m (+47 %, limit 10 %)"
     )
     assert check.fails(fog(16.4, 15), fog(15, 14)) is None  # +9.3 %: within the limit
     assert check.fails(fog(16.5, 15), fog(15, 14)) is None  # exactly +10 %: not more than the limit
@@ -278,12 +296,10 @@ def test_boundary_relative_check_worse_lower() -> None:
 def test_boundary_checks_worse_higher() -> None:
     relative, absolute = parse_compare_fail("boundary:10%"), parse_compare_fail("boundary:2.5")
     assert relative.fails(drop(20, 22), drop(30, 32)) == (
-        "frame_drop.drop_rate boundary moved toward the requirement: passed up to 30 % before, "
-        "now only up to 20 % (-33 %, limit 10 %)"
+        "frame_drop.drop_rate boundary moved toward the requirement: passed up to 30 % before, now only up to 20 % (-33 %, limit 10 %)"
     )
     assert absolute.fails(drop(27, 29), drop(30, 32)) == (
-        "frame_drop.drop_rate boundary moved toward the requirement: passed up to 30 % before, "
-        "now only up to 27 % (-3 %, limit 2.5 %)"
+        "frame_drop.drop_rate boundary moved toward the requirement: passed up to 30 % before, now only up to 27 % (-3 %, limit 2.5 %)"
     )
     assert absolute.fails(drop(28, 30), drop(30, 32)) is None  # -2: within 2.5
     assert relative.fails(drop(45, 47), drop(30, 32)) is None  # improvement
@@ -293,8 +309,7 @@ def test_boundary_checks_worse_higher() -> None:
 def test_boundary_absolute_check_worse_lower() -> None:
     check = parse_compare_fail("boundary:2.5")
     assert check.fails(fog(18, 17), fog(15, 14)) == (
-        "fog.visibility_m boundary moved toward the requirement: passed down to 15 m before, "
-        "now only down to 18 m (+3 m, limit 2.5 m)"
+        "fog.visibility_m boundary moved toward the requirement: passed down to 15 m before, now only down to 18 m (+3 m, limit 2.5 m)"
     )
     assert check.fails(fog(17, 16), fog(15, 14)) is None
     assert check.fails(fog(1, None), fog(15, 14)) is None  # now passes everywhere searched: better
@@ -303,8 +318,7 @@ def test_boundary_absolute_check_worse_lower() -> None:
 def test_boundary_check_unbracketed_and_not_comparable() -> None:
     check = parse_compare_fail("boundary:10%")
     assert check.fails(fog(None, 40, verdict="failed"), fog(15, 14)) == (
-        "fog.visibility_m boundary moved toward the mild side: passed down to 15 m before, "
-        "now failed everywhere searched (limit 10 %)"
+        "fog.visibility_m boundary moved toward the mild side: passed down to 15 m before, now failed everywhere searched (limit 10 %)"
     )
     assert check.fails(fog(None, 40), fog(None, 40)) is None  # never passed: cannot get worse
     assert check.fails(fog(50, 45, edge=60), fog(15, 14)) is None  # the requirement changed
@@ -340,7 +354,10 @@ def test_metric_check_higher_is_better() -> None:
 def test_regressions_lists_every_failing_check() -> None:
     checks = [parse_compare_fail(t) for t in ("boundary:10%", "ate_rmse:0.2", "tracking_rate:0.5")]
     found = regressions(checks, fog(22, 20, ate=0.9), fog(15, 14, ate=0.3))
-    assert [m.split(":")[0] for m in found] == ["fog.visibility_m boundary moved toward the requirement", "ate_rmse at the envelope's edge (fog.visibility_m = 25 m) got worse"]
+    assert [m.split(":")[0] for m in found] == [
+        "fog.visibility_m boundary moved toward the requirement",
+        "ate_rmse at the envelope's edge (fog.visibility_m = 25 m) got worse",
+    ]
     assert regressions(checks, fog(22, 20), None) == []
     assert regressions(checks, fog(15, 14), fog(15, 14)) == []
 
@@ -390,12 +407,17 @@ def test_history_change_text(tmp_path: Path, capsys: pytest.CaptureFixture[str])
     assert "pass 15 -> 22 m, +47 % (worse)" in out and "pass 0.3 -> 0.33, +10 % (better)" in out
 
 
-def test_history_of_one_test_and_its_plot(filled: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+def test_history_of_one_test_and_its_plot(
+    filled: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.chdir(tmp_path)
     assert main(["history", "fog", "--history-dir", str(filled)]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert lines[0] == f"{FOG}  (orbslam3 on kitti-07)"
-    assert lines[1] == "fog.visibility_m, more severe when lower, envelope edge 25 m; requirement: ate_rmse < 1.5 m wherever fog.visibility_m >= 25 m"
+    assert (
+        lines[1]
+        == "fog.visibility_m, more severe when lower, envelope edge 25 m; requirement: ate_rmse < 1.5 m wherever fog.visibility_m >= 25 m"
+    )
     assert lines[2].split() == ["run", "commit", "date", "boundary", "verdict", "trials"]
     assert lines[3].split()[:2] == ["0001", "aaaa111"] and lines[3].split()[4:] == ["14-15", "m", "passed", "0", "name", "baseline"]
     assert lines[5].split()[1] == "cccc333+dirty"
@@ -444,9 +466,16 @@ def test_history_figure_has_log_scale_for_wide_ranges(filled: Path) -> None:
 def test_history_in_an_old_search_unit_is_converted_and_another_unit_is_refused() -> None:
     # night.illuminance_lux was stored in log10 lx: 0.699 is 5 lx, a pass at 1.5 is 31.6 lx
     old = {
-        "test_id": "t::night", "system": "orbslam3", "dataset": "kitti/07", "parameter": "night.illuminance_lux", "worse": "lower",
-        "edge": 0.69897, "requirement": "tracking_rate >= 0.9 wherever night.illuminance_lux >= 0.699 log10 lx",
-        "envelope": ">= 0.699 log10 lx", "verdict": "failed", "termination": "tolerance",
+        "test_id": "t::night",
+        "system": "orbslam3",
+        "dataset": "kitti/07",
+        "parameter": "night.illuminance_lux",
+        "worse": "lower",
+        "edge": 0.69897,
+        "requirement": "tracking_rate >= 0.9 wherever night.illuminance_lux >= 0.699 log10 lx",
+        "envelope": ">= 0.699 log10 lx",
+        "verdict": "failed",
+        "termination": "tolerance",
         "boundary": {"pass_value": 1.5, "fail_value": 1.4, "unit": "log10 lx"},
         "trials": [{"value": 0.69897, "passed": False, "repeat": False}],
     }

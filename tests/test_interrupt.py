@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 #: a fake system whose first run announces itself and then sleeps until interrupted
-CONFTEST = '''
+CONFTEST = """
 import time
 from pathlib import Path
 
@@ -39,9 +39,9 @@ def sal_dataset():
     from sal_adapters import open_dataset
 
     return open_dataset("synthetic", scene="indoor", frames=8)
-'''
+"""
 
-SUITE = '''
+SUITE = """
 import pytest_sal as sal
 from pytest_sal import tracking_rate
 from sal_modules import fog
@@ -56,7 +56,7 @@ def test_fog(sal_outcome):
 @sal.require(tracking_rate >= 0.5)
 def test_point(sal_trial):
     pass
-'''
+"""
 
 
 @pytest.mark.parametrize("test", ["test_fog", "test_point"])
@@ -64,7 +64,14 @@ def test_ctrl_c_during_the_search_is_pytests_interrupted_summary(tmp_path: Path,
     (tmp_path / "conftest.py").write_text(CONFTEST)
     (tmp_path / "test_suite.py").write_text(SUITE)
     command = [sys.executable, "-m", "pytest", "-p", "no:cacheprovider", f"--sal-cache-dir={tmp_path / 'cache'}", f"test_suite.py::{test}"]
-    process = subprocess.Popen(command, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=dict(os.environ, PYTHONDONTWRITEBYTECODE="1"))
+    process = subprocess.Popen(
+        command,
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=dict(os.environ, PYTHONDONTWRITEBYTECODE="1"),
+    )
     try:
         deadline = time.monotonic() + 120
         while not (tmp_path / "running").exists():

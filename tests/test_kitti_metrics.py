@@ -12,7 +12,6 @@ import pytest
 from plugin_suites import project, run
 from scipy.spatial.transform import Rotation
 
-from pytest_sal.experiment.config import ConfigError, parse_config
 from pytest_sal.analysis.kitti_metrics import (
     KITTI_SEGMENTS_M,
     kitti_errors,
@@ -23,8 +22,9 @@ from pytest_sal.analysis.kitti_metrics import (
 )
 from pytest_sal.analysis.metrics import AGGREGATED, evaluate
 from pytest_sal.engine.outcome import Boundary, Outcome, Trial
-from pytest_sal.engine.requirements import METRICS, Requirement, r_rel, t_rel
 from pytest_sal.engine.requirement_runner import failure_message
+from pytest_sal.engine.requirements import METRICS, Requirement, r_rel, t_rel
+from pytest_sal.experiment.config import ConfigError, parse_config
 from sal_adapters.errors import SalError
 from sal_adapters.trajectory import Trajectory
 from sal_modules import fog
@@ -61,7 +61,9 @@ def devkit_translation_error(pose_error: np.ndarray) -> float:
     return math.sqrt(dx * dx + dy * dy + dz * dz)
 
 
-def devkit_sequence_errors(poses_gt: np.ndarray, poses_result: np.ndarray, lengths: tuple[float, ...]) -> list[tuple[int, int, float, float, float]]:
+def devkit_sequence_errors(
+    poses_gt: np.ndarray, poses_result: np.ndarray, lengths: tuple[float, ...]
+) -> list[tuple[int, int, float, float, float]]:
     """``(first_frame, last_frame, len, r_err, t_err)`` per segment, as ``calcSequenceErrors``."""
     err = []
     step_size = 10
@@ -218,18 +220,27 @@ def test_nothing_to_score_is_missing_with_a_reason_never_zero(shared_data: Path,
     excerpt = Trajectory.read_kitti(shared_data / "kitti" / "poses" / "07.txt")  # 140 frames, 78 m
     short = kitti_odometry(excerpt, excerpt)
     assert short.t_rel is None and short.r_rel is None and short.count == 0
-    assert short.reason == "the reference path is 78.4 m, too short for a segment of 100 m (KITTI segment lengths 100, 200, 300, 400, 500, 600, 700, 800 m)"
+    assert (
+        short.reason
+        == "the reference path is 78.4 m, too short for a segment of 100 m (KITTI segment lengths 100, 200, 300, 400, 500, 600, 700, 800 m)"
+    )
     assert kitti_odometry(excerpt, excerpt, segments_m=SHORT).t_rel == pytest.approx(0.0, abs=1e-9)
     tracked = np.zeros(len(gt07), dtype=bool)
     tracked[::10] = True  # every segment starts on a tracked frame, but ends on a lost one
     tracked[gt07.timestamps > 30] = False
     lost = kitti_errors(gt07.matrices, gt07.matrices, tracked, segments_m=(500.0,))
-    assert lost.t_rel is None and lost.skipped > 0 and lost.reason == f"none of the {lost.skipped} KITTI segment(s) has an estimated pose at both ends (tracking lost)"
+    assert (
+        lost.t_rel is None
+        and lost.skipped > 0
+        and lost.reason == f"none of the {lost.skipped} KITTI segment(s) has an estimated pose at both ends (tracking lost)"
+    )
 
 
 def mono_run(estimate: Trajectory, reference: Trajectory) -> RunResult:
     states = np.full(len(reference), TrackState.OK, dtype=np.int8)
-    return RunResult(system="fake", sequence="07", sensor="mono", timestamps=reference.timestamps, states=states, trajectory=estimate, maps=1)
+    return RunResult(
+        system="fake", sequence="07", sensor="mono", timestamps=reference.timestamps, states=states, trajectory=estimate, maps=1
+    )
 
 
 def test_a_monocular_run_is_scored_after_the_sim3_alignment_of_its_ate(gt07: Trajectory) -> None:
@@ -292,17 +303,32 @@ def test_a_failed_test_says_why_its_kitti_metric_is_missing() -> None:
     metrics = {"ate_rmse": 0.2, "tracking_rate": 1.0, "t_rel": None, "r_rel": None, "kitti_missing": why, "failures": []}
     trial = Trial(25.0, False, metrics, failed=["t_rel < 5 %"])
     outcome = Outcome(
-        test_id="t", system="fake", dataset="urban", parameter="fog.visibility_m", worse="lower", edge=25.0,
-        requirement="t_rel < 5 % wherever fog.visibility_m >= 25 m", criteria=[("t_rel", "<", 5.0)], envelope=">= 25 m",
-        verdict="failed", boundary=Boundary(None, 25.0, "m"), termination="edge failed", trials=[trial],
+        test_id="t",
+        system="fake",
+        dataset="urban",
+        parameter="fog.visibility_m",
+        worse="lower",
+        edge=25.0,
+        requirement="t_rel < 5 % wherever fog.visibility_m >= 25 m",
+        criteria=[("t_rel", "<", 5.0)],
+        envelope=">= 25 m",
+        verdict="failed",
+        boundary=Boundary(None, 25.0, "m"),
+        termination="edge failed",
+        trials=[trial],
     )
-    assert f"at fog.visibility_m = 25 m: ate_rmse 0.2, tracking_rate 1, t_rel missing: {why}; failed: t_rel < 5 %" in failure_message(outcome)
+    assert f"at fog.visibility_m = 25 m: ate_rmse 0.2, tracking_rate 1, t_rel missing: {why}; failed: t_rel < 5 %" in failure_message(
+        outcome
+    )
 
 
 def test_the_ini_segments_reach_the_plugins_trials(pytester: pytest.Pytester) -> None:
     """The 20-frame street is 19 m long: t_rel is missing with the devkit's lengths (the test
     fails, saying why) and scored with ``sal_kitti_segments = 5,10`` (the fake tracks it exactly)."""
-    project(pytester, "from pytest_sal.engine.requirements import t_rel  # pytest_sal exports it once __init__ lists it\n\n@sal.at(fog.visibility_m, 100)\n@sal.require(t_rel < 5)\ndef test_kitti(sal_trial):\n    pass\n")
+    project(
+        pytester,
+        "from pytest_sal.engine.requirements import t_rel  # pytest_sal exports it once __init__ lists it\n\n@sal.at(fog.visibility_m, 100)\n@sal.require(t_rel < 5)\ndef test_kitti(sal_trial):\n    pass\n",
+    )
     missing = run(pytester, [])
     missing.assert_outcomes(failed=1)
     missing.stdout.fnmatch_lines(["*t_rel missing: the reference path is * m, too short for a segment of 100 m*failed: t_rel < 5 %*"])

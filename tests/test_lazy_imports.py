@@ -63,10 +63,12 @@ def test_a_plain_pytest_session_loads_no_heavy_module(pytester: pytest.Pytester)
 def test_a_robustness_test_file_loads_what_it_needs(pytester: pytest.Pytester) -> None:
     # the counter-check: the same dump sees numpy once a test names a perturbation module
     pytester.makeconftest(DUMP_CONFTEST)
-    pytester.makepyfile(test_fog=(
-        "import pytest_sal as sal\nfrom pytest_sal import tracking_rate\nfrom sal_modules import fog\n\n"
-        "@sal.require(tracking_rate >= 0.5, fog.visibility_m >= 25)\ndef test_fog(sal_outcome):\n    pass\n"
-    ))
+    pytester.makepyfile(
+        test_fog=(
+            "import pytest_sal as sal\nfrom pytest_sal import tracking_rate\nfrom sal_modules import fog\n\n"
+            "@sal.require(tracking_rate >= 0.5, fog.visibility_m >= 25)\ndef test_fog(sal_outcome):\n    pass\n"
+        )
+    )
     result = pytester.runpytest_subprocess("-p", "no:cacheprovider", "--collect-only", "-q")
     result.stdout.fnmatch_lines(["test_fog.py::test_fog"])
     loaded = set(json.loads((pytester.path / "loaded.json").read_text()))
@@ -85,8 +87,10 @@ def test_every_public_name_resolves_and_is_listed(package: str) -> None:
 @pytest.mark.parametrize("package", PACKAGES)
 def test_an_unknown_name_is_an_attribute_error_naming_the_package(package: str) -> None:
     module = importlib.import_module(package)
-    with pytest.raises(AttributeError, match=rf"^module '{package}' has no attribute 'no_such_name'; (did you mean|names|modules and names): "):
-        module.no_such_name  # noqa: B018
+    with pytest.raises(
+        AttributeError, match=rf"^module '{package}' has no attribute 'no_such_name'; (did you mean|names|modules and names): "
+    ):
+        module.no_such_name
     with pytest.raises(ImportError, match="no_such_name"):
         exec(f"from {package} import no_such_name")
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 import sys
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +19,7 @@ from sal_modules.light.sensor import LUMA, white_balance
 from sal_modules.light.sun_glare import GHOSTS, sun_direction
 
 
-@lru_cache(maxsize=None)
+@cache
 def urban(frames: int = 2) -> Sequence:
     return open_dataset("synthetic", scene="urban", frames=frames)
 
@@ -55,7 +55,13 @@ def euroc(shared_data: Path) -> Sequence:
 
 def test_auto_exposure_lengthens_the_exposure_first_then_raises_the_gain() -> None:
     # (lux, t, g, p, f) with daylight 10000 lx, t <= 8, g <= 64: E_min = 10000 / 512 = 19.53 lx
-    for lux, t, g, p, f in ((20_000, 0.5, 1, 1, 1), (10_000, 1, 1, 1, 1), (2000, 5, 1, 1, 1), (100, 8, 12.5, 0.08, 1), (5, 8, 64, 0.004, 0.256)):
+    for lux, t, g, p, f in (
+        (20_000, 0.5, 1, 1, 1),
+        (10_000, 1, 1, 1, 1),
+        (2000, 5, 1, 1, 1),
+        (100, 8, 12.5, 0.08, 1),
+        (5, 8, 64, 0.004, 0.256),
+    ):
         e = auto_exposure(lux, 10_000.0, 8.0, 64.0)
         assert (e.time, e.gain, e.photons, e.brightness) == pytest.approx((t, g, p, f)), lux
 
@@ -92,7 +98,15 @@ def test_night_darkens_and_relative_noise_grows_as_the_light_falls() -> None:
 def test_night_shot_noise_has_poisson_variance_in_electrons(read_noise_e: float) -> None:
     """A flat grey patch at 1000 lx, exposure capped at daylight: p = 0.1 of the photons, gain 10."""
     full_well, lux = 1000.0, 1000.0
-    module = ready("night", illuminance_lux=lux, max_exposure_factor=1.0, max_gain=1000.0, full_well_e=full_well, read_noise_e=read_noise_e, colour_temperature_k=6500.0)
+    module = ready(
+        "night",
+        illuminance_lux=lux,
+        max_exposure_factor=1.0,
+        max_gain=1000.0,
+        full_well_e=full_well,
+        read_noise_e=read_noise_e,
+        colour_temperature_k=6500.0,
+    )
     e = module.exposure()
     assert (e.photons, e.gain, e.brightness) == pytest.approx((0.1, 10.0, 1.0))
     image = flat(150, (400, 400))
@@ -190,10 +204,14 @@ def test_onnx_backend_still_adds_the_noise_of_the_light_level(onnx_models: dict[
     image = flat(150, (96, 128))
     out = ready("night", model=str(onnx_models["identity"]), illuminance_lux=5.0).apply(image, None, 0, "left")
     lin = linear(out)
-    assert lin.std() > 0.01 and lin.mean() == pytest.approx(linear(image).mean(), rel=0.05), "the network decides brightness, the sensor adds noise"
+    assert lin.std() > 0.01 and lin.mean() == pytest.approx(linear(image).mean(), rel=0.05), (
+        "the network decides brightness, the sensor adds noise"
+    )
 
 
-def test_onnx_backend_errors_name_the_file_and_the_extra(onnx_models: dict[str, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_onnx_backend_errors_name_the_file_and_the_extra(
+    onnx_models: dict[str, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     missing = tmp_path / "nowhere" / "day2night.onnx"
     with pytest.raises(ModuleError, match=f"night: model file {missing} does not exist"):
         ready("night", model=str(missing))
@@ -281,7 +299,10 @@ def test_glare_is_brighter_closer_to_the_sun_on_the_image() -> None:
 def test_stronger_sun_changes_the_image_more() -> None:
     frame = urban()[0]
     image, depth = frame.image, frame.depth  # the default sun (straight ahead, 8 deg up) is in the sky
-    diffs = [np.abs(glare_module(sun_illuminance_klux=k).apply(image, depth, 0, "left").astype(int) - image).mean() for k in (0.0, 5.0, 20.0, 60.0, 150.0)]
+    diffs = [
+        np.abs(glare_module(sun_illuminance_klux=k).apply(image, depth, 0, "left").astype(int) - image).mean()
+        for k in (0.0, 5.0, 20.0, 60.0, 150.0)
+    ]
     assert diffs[0] == 0 and all(b > a for a, b in zip(diffs, diffs[1:])), diffs
 
 
@@ -348,7 +369,7 @@ def test_light_modules_on_real_grey_frames(kind: str, kitti: Sequence, euroc: Se
     assert linear(glare_left).mean() > linear(clean).mean() + 0.05
     if seq.sensor == "stereo":
         right = seq[1].right
-        assert np.mean((night.right != right)) > 0.3 and not np.array_equal(night.image, night.right)
+        assert np.mean(night.right != right) > 0.3 and not np.array_equal(night.image, night.right)
         glare_right = glare.apply(right, sky_of(right), seq[1].index, "right")
         assert np.array_equal(glare_right[..., 0], glare_right[..., 2])
         assert linear(glare_right).mean() > linear(right).mean() + 0.05

@@ -47,7 +47,9 @@ def curve(n: int = 200, fps: float = 10.0, noise: float = 0.0, seed: int = 0) ->
 def similar(traj: Trajectory, s: float, rotvec: tuple[float, float, float], t: tuple[float, float, float]) -> Trajectory:
     """``traj`` in a world moved by the similarity ``p -> s R p + t``."""
     r = Rotation.from_rotvec(rotvec)
-    return Trajectory(traj.timestamps, s * r.apply(traj.positions.copy()) + np.asarray(t), (r * Rotation.from_quat(traj.quaternions.copy())).as_quat())
+    return Trajectory(
+        traj.timestamps, s * r.apply(traj.positions.copy()) + np.asarray(t), (r * Rotation.from_quat(traj.quaternions.copy())).as_quat()
+    )
 
 
 def run_result(traj: Trajectory | None, *, sensor: str = "mono", frames: int = 200, failure: str | None = None) -> RunResult:
@@ -55,7 +57,9 @@ def run_result(traj: Trajectory | None, *, sensor: str = "mono", frames: int = 2
     states = np.full(frames, TrackState.LOST, dtype=np.int8)
     if traj is not None:
         states[np.isin(stamps, traj.timestamps)] = TrackState.OK
-    return RunResult(system="fake", sequence="loop", sensor=sensor, timestamps=stamps, states=states, trajectory=traj, maps=1, failure=failure)
+    return RunResult(
+        system="fake", sequence="loop", sensor=sensor, timestamps=stamps, states=states, trajectory=traj, maps=1, failure=failure
+    )
 
 
 def evo_cli(tool: str, runs: list[list[str]], workdir: Path) -> list[tuple[dict[str, float], int, float | None]]:
@@ -70,7 +74,15 @@ def evo_cli(tool: str, runs: list[list[str]], workdir: Path) -> list[tuple[dict[
     for args, out, home in zip(runs, zips, homes):
         home.mkdir()
         env = {**os.environ, "HOME": str(home), "MPLBACKEND": "Agg"}
-        procs.append(subprocess.Popen([str(exe), *args, "--save_results", str(out), "--no_warnings", "--silent"], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True))
+        procs.append(
+            subprocess.Popen(
+                [str(exe), *args, "--save_results", str(out), "--no_warnings", "--silent"],
+                env=env,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.STDOUT,
+                text=True,
+            )
+        )
     results = []
     for args, proc, out in zip(runs, procs, zips):
         log, _ = proc.communicate(timeout=120)
@@ -78,7 +90,11 @@ def evo_cli(tool: str, runs: list[list[str]], workdir: Path) -> list[tuple[dict[
         with zipfile.ZipFile(out) as z:
             stats = json.loads(z.read("stats.json"))
             count = len(np.load(io.BytesIO(z.read("error_array.npy"))))
-            sim3 = np.load(io.BytesIO(z.read("alignment_transformation_sim3.npy"))) if "alignment_transformation_sim3.npy" in z.namelist() else None
+            sim3 = (
+                np.load(io.BytesIO(z.read("alignment_transformation_sim3.npy")))
+                if "alignment_transformation_sim3.npy" in z.namelist()
+                else None
+            )
         results.append((stats, count, None if sim3 is None else float(np.cbrt(np.linalg.det(sim3[:3, :3])))))
     return results
 
@@ -325,5 +341,16 @@ def test_aggregate_ignores_missing_values() -> None:
 
 
 def test_run_metrics_fields_are_json_ready() -> None:
-    metrics = RunMetrics(system="s", sequence="q", sensor="mono", scored="final", align="sim3", frames=0, tracked=0, tracking_rate=0.0, first_tracked=None, maps=0)
+    metrics = RunMetrics(
+        system="s",
+        sequence="q",
+        sensor="mono",
+        scored="final",
+        align="sim3",
+        frames=0,
+        tracked=0,
+        tracking_rate=0.0,
+        first_tracked=None,
+        maps=0,
+    )
     assert json.loads(json.dumps(metrics.to_dict()))["scored"] == "final"

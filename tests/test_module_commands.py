@@ -36,7 +36,25 @@ def test_modules_with_a_misspelt_name_suggests_the_closest(capsys: pytest.Captur
 
 def test_preview_writes_original_and_perturbed_side_by_side(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "p.png"
-    assert main(["preview", "test_square", "size=50", "value=255", "--dataset", "synthetic", "--dataset-option", "scene=indoor", "--frame", "1", "-o", str(out)]) == 0
+    assert (
+        main(
+            [
+                "preview",
+                "test_square",
+                "size=50",
+                "value=255",
+                "--dataset",
+                "synthetic",
+                "--dataset-option",
+                "scene=indoor",
+                "--frame",
+                "1",
+                "-o",
+                str(out),
+            ]
+        )
+        == 0
+    )
     assert "frame 1 of synthetic/indoor-seed0: kept" in capsys.readouterr().out
     sheet = read_image(out)
     assert sheet.shape == (28 + 480, 640 * 2 + 8, 3)  # title bar, one stream (RGB-D), two tiles
@@ -47,7 +65,24 @@ def test_preview_writes_original_and_perturbed_side_by_side(tmp_path: Path, caps
 
 def test_preview_of_a_chain_with_addressed_parameters(tmp_path: Path) -> None:
     out = tmp_path / "chain.png"
-    assert main(["preview", "frame_drop>>test_square", "mode=periodic", "period=2", "size=5", "--dataset", "synthetic", "--frame", "1", "-o", str(out)]) == 0
+    assert (
+        main(
+            [
+                "preview",
+                "frame_drop>>test_square",
+                "mode=periodic",
+                "period=2",
+                "size=5",
+                "--dataset",
+                "synthetic",
+                "--frame",
+                "1",
+                "-o",
+                str(out),
+            ]
+        )
+        == 0
+    )
     sheet = read_image(out)  # urban stereo: two rows; frame 1 is dropped (every 2nd frame)
     assert sheet.shape == (28 + 376 * 2 + 8, 1240 * 2 + 8, 3)
     dropped = sheet[28:404, 1248:]
@@ -60,8 +95,14 @@ def test_preview_of_a_chain_with_addressed_parameters(tmp_path: Path) -> None:
         (["preview", "nosuch", "--dataset", "synthetic"], "unknown perturbation module 'nosuch'"),
         (["preview", "fgo", "--dataset", "synthetic"], "unknown perturbation module 'fgo'; did you mean 'fog'?"),
         (["preview", "night>>fgo", "--dataset", "synthetic"], "unknown perturbation module 'fgo'; did you mean 'fog'?"),
-        (["preview", "night>>fog", "fog.visibilty_m=30", "--dataset", "synthetic"], "has no parameter 'fog.visibilty_m'; did you mean 'fog.visibility_m'?"),
-        (["preview", "test_square", "size=-1", "--dataset", "synthetic"], "test_square: size = -1 px is not valid; size must be an integer in 0 .. 1000 px"),
+        (
+            ["preview", "night>>fog", "fog.visibilty_m=30", "--dataset", "synthetic"],
+            "has no parameter 'fog.visibilty_m'; did you mean 'fog.visibility_m'?",
+        ),
+        (
+            ["preview", "test_square", "size=-1", "--dataset", "synthetic"],
+            "test_square: size = -1 px is not valid; size must be an integer in 0 .. 1000 px",
+        ),
         (["preview", "test_square", "sise=3", "--dataset", "synthetic"], "did you mean 'size'?"),
         (["preview", "test_square", "size", "--dataset", "synthetic"], "a module parameter expects KEY=VALUE, got 'size'"),
         (["preview", "test_square", "--dataset", "synthetic", "--dataset-option", "frames=3", "--frame", "9"], "past the end"),

@@ -7,7 +7,7 @@ fails ``test_every_registered_module_has_a_case``.
 from __future__ import annotations
 
 import json
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 import pytest
@@ -32,7 +32,7 @@ PER_FRAME = [n for n in NAMES if not (sal_modules.module_class(n).whole_sequence
 LADDERS = [(name, param) for name in NAMES for param in CASES[name].ladder]
 
 
-@lru_cache(maxsize=None)
+@cache
 def synthetic(scene: str, sensor: str | None, frames: int) -> Sequence:
     return open_dataset("synthetic", scene=scene, frames=frames, sensor=sensor)
 

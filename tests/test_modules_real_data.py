@@ -5,7 +5,7 @@ model, here a tiny one built by the test)."""
 from __future__ import annotations
 
 import warnings
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -21,14 +21,14 @@ CASES = all_cases()
 NAMES = sorted(CASES)
 
 
-@lru_cache(maxsize=None)
+@cache
 def euroc(root: Path) -> Sequence:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DatasetWarning)  # 4 missing cam1 files, reported by the adapter tests
         return open_dataset("euroc", root / "euroc" / "V1_01_easy_micro", stereo=True, start=30, max_frames=8)
 
 
-@lru_cache(maxsize=None)
+@cache
 def kitti(root: Path) -> Sequence:
     return open_dataset("kitti", root / "kitti" / "sequences" / "07", start=20, max_frames=8)
 

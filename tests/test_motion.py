@@ -8,7 +8,7 @@ blurred, rolling or late camera would see), then on the real KITTI 07 and EuRoC 
 from __future__ import annotations
 
 import warnings
-from functools import lru_cache, partial
+from functools import cache, partial
 
 import cv2
 import numpy as np
@@ -22,7 +22,7 @@ from sal_modules import ModuleContext, ModuleError, create, perturb
 from sal_modules.depth import DepthProvider
 
 
-@lru_cache(maxsize=None)
+@cache
 def urban(frames: int = 4, sensor: str = "stereo") -> Sequence:
     return open_dataset("synthetic", scene="urban", frames=frames, sensor=sensor)
 
@@ -46,8 +46,14 @@ def render_urban(t: float, offset: np.ndarray | None = None, right: bool = False
 
 
 def single_frame(image: np.ndarray, camera: Camera) -> Sequence:
-    return Sequence(kind="synthetic", name="probe", camera=camera, sensor="mono", fps=10.0,
-                    records=[FrameRecord(index=0, timestamp=0.0, stem="000000", image=lambda: image)])
+    return Sequence(
+        kind="synthetic",
+        name="probe",
+        camera=camera,
+        sensor="mono",
+        fps=10.0,
+        records=[FrameRecord(index=0, timestamp=0.0, stem="000000", image=lambda: image)],
+    )
 
 
 def blur_once(image: np.ndarray, depth: np.ndarray, camera: Camera, **params: float) -> np.ndarray:
@@ -64,7 +70,13 @@ PROBE = Camera(fx=300.0, fy=300.0, cx=100.0, cy=80.0, width=480, height=360)
 
 @pytest.mark.parametrize(
     ("speed_kmh", "exposure_ms", "depth_m", "offset"),
-    [(36.0, 50.0, 5.0, (200, 0)), (72.0, 40.0, 12.0, (300, 0)), (50.0, 30.0, 4.0, (0, 180)), (54.0, 50.0, 6.0, (300, 0)), (30.0, 30.0, 8.0, (300, 0))],
+    [
+        (36.0, 50.0, 5.0, (200, 0)),
+        (72.0, 40.0, 12.0, (300, 0)),
+        (50.0, 30.0, 4.0, (0, 180)),
+        (54.0, 50.0, 6.0, (300, 0)),
+        (30.0, 30.0, 8.0, (300, 0)),
+    ],
     ids=["22px", "21px-far", "21px-vertical", "43px", "10px"],
 )
 def test_motion_blur_smears_a_point_over_the_predicted_segment_with_box_weights(speed_kmh, exposure_ms, depth_m, offset):
@@ -177,6 +189,7 @@ def test_motion_blur_on_real_kitti_blurs_the_road_and_keeps_what_has_no_depth(ki
 
 # -- rolling_shutter -------------------------------------------------------------------------
 
+
 def panning(shift_px: int, frames: int = 4, fps: float = 10.0, size: tuple[int, int] = (240, 320)) -> Sequence:
     """A mono sequence whose image moves right by ``shift_px`` per frame (a rolled texture)."""
     h, w = size
@@ -184,7 +197,9 @@ def panning(shift_px: int, frames: int = 4, fps: float = 10.0, size: tuple[int, 
     texture = cv2.normalize(cv2.GaussianBlur(noise, (0, 0), 2.5), None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
     rgb = np.repeat(texture[..., None], 3, axis=2)
     camera = Camera(fx=300.0, fy=300.0, cx=w / 2, cy=h / 2, width=w, height=h)
-    records = [FrameRecord(index=i, timestamp=i / fps, stem=f"{i:06d}", image=partial(np.roll, rgb, i * shift_px, 1)) for i in range(frames)]
+    records = [
+        FrameRecord(index=i, timestamp=i / fps, stem=f"{i:06d}", image=partial(np.roll, rgb, i * shift_px, 1)) for i in range(frames)
+    ]
     return Sequence(kind="synthetic", name=f"panning-{shift_px}px", camera=camera, sensor="mono", fps=fps, records=records)
 
 
@@ -264,6 +279,7 @@ def test_rolling_shutter_grows_with_readout_on_real_kitti_and_euroc(kitti07, eur
 
 # -- stereo_desync ---------------------------------------------------------------------------
 
+
 def test_stereo_desync_with_zero_delay_is_the_identity():
     clean = urban(3)
     out = perturb(clean, create("stereo_desync", delay_ms=0.0))
@@ -313,6 +329,6 @@ def test_stereo_desync_on_real_euroc_and_kitti(euroc, kitti07):
     assert np.array_equal(one_period[1].right, euroc[2].right)
     between = perturb(euroc, create("stereo_desync", delay_ms=20.0))[1]
     assert np.array_equal(between.image, euroc[1].image)
-    assert 0 < mad(between.right, euroc[1].right) and not np.array_equal(between.right, euroc[2].right)
+    assert mad(between.right, euroc[1].right) > 0 and not np.array_equal(between.right, euroc[2].right)
     with pytest.raises(ModuleError, match="kitti/07' is mono"):
         perturb(kitti07, create("stereo_desync"))

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 
 import cv2
@@ -18,7 +18,7 @@ from sal_modules.optics.defocus import circle_of_confusion_px
 KITTI_SIZE = (376, 1241)
 
 
-@lru_cache(maxsize=None)
+@cache
 def urban(frames: int = 3) -> Sequence:
     return open_dataset("synthetic", scene="urban", frames=frames)
 

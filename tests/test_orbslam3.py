@@ -33,15 +33,14 @@ import pytest
 
 pytest.importorskip("pyorbslam3")
 
-from sal_adapters import Camera, Trajectory  # noqa: E402
-from sal_adapters.datasets import open_dataset  # noqa: E402
-from sal_wrappers import RunResult, SlamSystemError, TrackState, create  # noqa: E402
-from sal_wrappers import orbslam3 as orbslam3_module  # noqa: E402
-from sal_wrappers.child_process import ChildOutcome  # noqa: E402
-from pytest_sal.analysis.metrics import evaluate  # noqa: E402
-from sal_wrappers.pacing import repace  # noqa: E402
-from sal_wrappers.orbslam3 import ORB_STATES, OrbSlam3, map_states, read_final_trajectory, segment_ids  # noqa: E402
-from sal_wrappers.orbslam3_settings import (  # noqa: E402
+from pytest_sal.analysis.metrics import evaluate
+from sal_adapters import Camera, Trajectory
+from sal_adapters.datasets import open_dataset
+from sal_wrappers import RunResult, SlamSystemError, TrackState, create
+from sal_wrappers import orbslam3 as orbslam3_module
+from sal_wrappers.child_process import ChildOutcome
+from sal_wrappers.orbslam3 import ORB_STATES, OrbSlam3, map_states, read_final_trajectory, segment_ids
+from sal_wrappers.orbslam3_settings import (
     VIEWER_KEYS,
     Matrix,
     OrbParameters,
@@ -50,6 +49,7 @@ from sal_wrappers.orbslam3_settings import (  # noqa: E402
     settings_yaml,
     write_settings,
 )
+from sal_wrappers.pacing import repace
 
 OK, RL, LOST = ORB_STATES["OK"], ORB_STATES["RECENTLY_LOST"], ORB_STATES["LOST"]
 NI, NIY = ORB_STATES["NOT_INITIALIZED"], ORB_STATES["NO_IMAGES_YET"]
@@ -97,9 +97,7 @@ def ate(estimate: Trajectory, reference: Trajectory, sim3: bool) -> tuple[float,
     from evo.core import metrics, sync
 
     ref, est = sync.associate_trajectories(reference.to_evo(), estimate.to_evo(), max_diff=0.01)
-    result = evo.main_ape.ape(
-        ref, copy.deepcopy(est), pose_relation=metrics.PoseRelation.translation_part, align=True, correct_scale=sim3
-    )
+    result = evo.main_ape.ape(ref, copy.deepcopy(est), pose_relation=metrics.PoseRelation.translation_part, align=True, correct_scale=sim3)
     return float(result.stats["rmse"]), int(ref.num_poses)
 
 
@@ -206,7 +204,9 @@ def test_settings_rectified_stereo_copies_camera1() -> None:
 
 
 def test_settings_rgbd_keys(tmp_path: Path) -> None:
-    camera = Camera(fx=525.0, fy=525.0, cx=319.5, cy=239.5, width=640, height=480, distortion=(0.1, -0.2, 0.001, 0.002, 0.05), depth_scale=5000.0)
+    camera = Camera(
+        fx=525.0, fy=525.0, cx=319.5, cy=239.5, width=640, height=480, distortion=(0.1, -0.2, 0.001, 0.002, 0.05), depth_scale=5000.0
+    )
     path = write_settings(tmp_path / "rgbd.yaml", camera, "rgbd", 30.0)
     text = path.read_text()
     storage = read_back(path)
@@ -267,8 +267,8 @@ def test_mode_must_fit_the_sequence() -> None:
 def test_state_mapping_and_segments() -> None:
     raw = [NIY, NI, NI, OK, OK, RL, OK, LOST, NIY, NI, OK, OK, OK, RL, None]
     states = map_states(raw)
-    N, O, L = TrackState.NOT_INITIALISED, TrackState.OK, TrackState.LOST
-    assert states.tolist() == [N, N, N, O, O, L, O, L, L, L, O, O, O, L, L]
+    N, K, L = TrackState.NOT_INITIALISED, TrackState.OK, TrackState.LOST
+    assert states.tolist() == [N, N, N, K, K, L, K, L, L, L, K, K, K, L, L]
     # RECENTLY_LOST -> OK stays in the map; LOST / reset starts a new one
     assert segment_ids(raw).tolist() == [-1, -1, -1, 0, 0, -1, 0, -1, -1, -1, 1, 1, 1, -1, -1]
     assert segment_ids([OK, NI, OK]).tolist() == [0, -1, 1]
@@ -280,8 +280,7 @@ def test_read_final_trajectory_snaps_times(tmp_path: Path) -> None:
     frames = np.array([1403715273.262143, 1403715273.312143, 1403715273.362143])
     path = tmp_path / "f.txt"
     path.write_text(
-        "1403715273262143232.000000 0.0 0.0 0.0 -0.0 -0.0 -0.0 1.0\n"
-        "1403715273312143104.000000 0.1 0.2 0.3 0.0 0.0 0.7071068 0.7071068\n"
+        "1403715273262143232.000000 0.0 0.0 0.0 -0.0 -0.0 -0.0 1.0\n1403715273312143104.000000 0.1 0.2 0.3 0.0 0.0 0.7071068 0.7071068\n"
     )
     traj = read_final_trajectory(path, frames)
     np.testing.assert_array_equal(traj.timestamps, frames[:2])
@@ -329,14 +328,22 @@ def test_a_crash_after_the_last_frame_is_scored(tmp_path: Path, phase: str, fram
     timeout is not."""
     sequence = open_dataset("synthetic", scene="indoor", frames=8, sensor="rgbd")
     poses = [m.ravel().tolist() for m in sequence.groundtruth.matrices]
-    record = {"phase": phase, "raw_states": [OK] * frames_reported, "poses": poses[:frames_reported], "track_times": [0.03] * frames_reported, "final_saved": False}
+    record = {
+        "phase": phase,
+        "raw_states": [OK] * frames_reported,
+        "poses": poses[:frames_reported],
+        "track_times": [0.03] * frames_reported,
+        "final_saved": False,
+    }
     failure = "timed out after 5 s and was killed" if timed_out else "killed by SIGSEGV (segmentation fault)"
     outcome = ChildOutcome(record, -11 if not timed_out else -9, failure, 3.0, tmp_path / "orbslam3.log", "", timed_out)
     result = create("orbslam3")._result(sequence, "rgbd", outcome, {"settings": "s.yaml", "vocabulary": "v.txt"}, tmp_path / "final.txt")
     metrics = evaluate(result, sequence.groundtruth)
     assert result.info["written_before_failure"] is scored and metrics.failure == result.failure
     if scored:
-        assert metrics.ate_rmse == pytest.approx(0.0, abs=1e-9) and result.failure.endswith("the per-frame results of all 8 frames are kept and scored")
+        assert metrics.ate_rmse == pytest.approx(0.0, abs=1e-9) and result.failure.endswith(
+            "the per-frame results of all 8 frames are kept and scored"
+        )
     else:
         assert metrics.ate_rmse is None
 
@@ -347,7 +354,7 @@ def _fake_child(steps_s: list[float], failure: str | None = None):
     frame tracked); it records the headers it was given."""
     headers: list[dict] = []
 
-    def run_child(entry, header, frames, workdir, timeout, log_name="run.log"):  # noqa: ANN001, ANN202
+    def run_child(entry, header, frames, workdir, timeout, log_name="run.log"):
         step = steps_s[len(headers)]
         headers.append(dict(header))
         n = 30
@@ -482,6 +489,7 @@ def test_orbslam3_real_stereo_synthetic_urban_result_fields(urban_stereo: tuple[
     assert result.log_path.is_file() and "Vocabulary loaded" in result.log_path.read_text()
     RunResult.from_json(result.to_json())
 
+
 def test_orbslam3_real_stereo_wrong_baseline_breaks_the_bound(
     urban_stereo: tuple[RunResult, object], vocabulary: Path, tmp_path: Path
 ) -> None:
@@ -494,7 +502,6 @@ def test_orbslam3_real_stereo_wrong_baseline_breaks_the_bound(
     assert result.ok, result.failure + "\n" + result.log_tail
     error, _ = ate(result.trajectory, sequence.groundtruth, sim3=False)
     assert error > 2 * URBAN_ATE_BOUND_M, _report(result, error)  # measured 0.55 m
-
 
 
 def test_orbslam3_real_rgbd_synthetic_indoor(indoor_rgbd: tuple[RunResult, object]) -> None:

@@ -31,8 +31,7 @@ import pytest
 
 from pytest_sal.cli.main import main
 from pytest_sal.testing import FakeSlam
-from sal_adapters import SalError, open_dataset, write_sequence
-from sal_adapters import atomic
+from sal_adapters import SalError, atomic, open_dataset, write_sequence
 from sal_adapters.atomic import Replacement, recover, replacing_dir
 from sal_adapters.errors import WriteError
 from sal_adapters.textfiles import atomic_write_text
@@ -78,7 +77,9 @@ def leftovers(root: Path) -> list[str]:
 
 def sal(*args: str | Path, cwd: Path, **kwargs: object) -> subprocess.Popen[bytes]:
     """``sal ARGS`` in a child process (the environment of this session: its isolated caches)."""
-    return subprocess.Popen([sys.executable, "-m", "pytest_sal.cli.main", *map(str, args)], cwd=cwd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, **kwargs)  # type: ignore[call-overload]
+    return subprocess.Popen(
+        [sys.executable, "-m", "pytest_sal.cli.main", *map(str, args)], cwd=cwd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, **kwargs
+    )  # type: ignore[call-overload]
 
 
 def error_line(capsys: pytest.CaptureFixture[str]) -> str:
@@ -105,8 +106,14 @@ def test_dry_run_touches_nothing_on_disk(tmp_path: Path) -> None:
     config = write_config(work)
     before = snapshot(tmp_path)  # a fresh home: not even matplotlib's font list may appear
 
-    out = subprocess.run([sys.executable, "-m", "pytest_sal.cli.main", "perturb", str(config), "--dry-run", "--cache-dir", str(tmp_path / "trials")],
-                         cwd=work, env=env, capture_output=True, text=True, timeout=300)
+    out = subprocess.run(
+        [sys.executable, "-m", "pytest_sal.cli.main", "perturb", str(config), "--dry-run", "--cache-dir", str(tmp_path / "trials")],
+        cwd=work,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
 
     assert out.returncode == 0, out.stderr
     assert "dry run: nothing written" in out.stdout
@@ -181,8 +188,12 @@ def test_kill_9_of_a_rerun_keeps_the_previous_output(tmp_path: Path, children: l
         assert snapshot(root) == before, f"kill -9 at {moment} changed the previous output"
 
     flag = tmp_path / "staged"
-    process = subprocess.Popen([sys.executable, "-c", PAUSE_BEFORE_COMMIT, str(flag), "perturb", str(new_config), "--cache-dir", str(tmp_path / "trials-old")],
-                               cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    process = subprocess.Popen(
+        [sys.executable, "-c", PAUSE_BEFORE_COMMIT, str(flag), "perturb", str(new_config), "--cache-dir", str(tmp_path / "trials-old")],
+        cwd=tmp_path,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+    )
     children.append(process)
     deadline = time.monotonic() + 120
     while not flag.exists():
@@ -204,7 +215,9 @@ def test_kill_9_of_a_rerun_keeps_the_previous_output(tmp_path: Path, children: l
 # ------------------------------------------------------------------------ disk full, no folder
 
 
-def test_disk_full_is_one_line_naming_the_path_and_keeps_the_output(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+def test_disk_full_is_one_line_naming_the_path_and_keeps_the_output(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     config = write_config(tmp_path, frames=4)
     monkeypatch.chdir(tmp_path)
     assert main(["perturb", str(config)]) == 0
@@ -225,7 +238,9 @@ def test_disk_full_is_one_line_naming_the_path_and_keeps_the_output(tmp_path: Pa
     assert leftovers(root) == []
 
 
-def test_a_file_where_the_output_folder_belongs_is_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+def test_a_file_where_the_output_folder_belongs_is_one_line(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     (tmp_path / "taken").write_text("a file, not a folder\n")
     config = write_config(tmp_path, frames=4, base_dir="taken/results")
     monkeypatch.chdir(tmp_path)
@@ -277,7 +292,9 @@ class StoppingSlam(FakeSlam):
         return super().run(sequence, workdir, timeout)
 
 
-def test_evaluate_and_report_stopped_midway_keep_the_previous_results(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+def test_evaluate_and_report_stopped_midway_keep_the_previous_results(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     config = write_config(tmp_path, frames=4)
     monkeypatch.chdir(tmp_path)
     root = tmp_path / "results" / NAME
@@ -295,10 +312,14 @@ def test_evaluate_and_report_stopped_midway_keep_the_previous_results(tmp_path: 
         assert error_line(capsys) == "sal: error: stopped in the rain"
         assert snapshot(root / "slam_results") == evaluated and leftovers(root) == []
 
-        monkeypatch.setattr(shutil, "copyfile", lambda source, target: (_ for _ in ()).throw(OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))))
+        monkeypatch.setattr(
+            shutil, "copyfile", lambda source, target: (_ for _ in ()).throw(OSError(errno.ENOSPC, os.strerror(errno.ENOSPC)))
+        )
         assert main(["report", str(config)]) == 2
         err = error_line(capsys)
-        assert err.startswith(f"sal: error: cannot write {Path('results') / NAME / 'report' / 'assets'}/") and err.endswith(".png: No space left on device")
+        assert err.startswith(f"sal: error: cannot write {Path('results') / NAME / 'report' / 'assets'}/") and err.endswith(
+            ".png: No space left on device"
+        )
         assert snapshot(root / "report") == reported and leftovers(root) == []
     finally:
         SYSTEMS.unregister("fake")

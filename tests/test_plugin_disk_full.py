@@ -10,7 +10,7 @@ import pytest
 from plugin_suites import CONFTEST, HEADER, SMALL_DATASET, output, write_tracked
 
 #: every atomic write below a folder named in FULL fails like write(2) on a full disk
-FULL_DISK = '''
+FULL_DISK = """
 import errno
 import os
 from pathlib import Path
@@ -29,14 +29,14 @@ def _full_disk(path, write, binary=False):
 
 
 textfiles.atomic_write = _full_disk
-'''
+"""
 
-TESTS = '''
+TESTS = """
 
 @sal.require(tracking_rate >= 0.5, fog.visibility_m >= 30, tolerance=5, max_trials=6)
 def test_fog(sal_outcome):
     pass
-'''
+"""
 
 
 def test_a_full_disk_at_session_end_costs_only_the_outputs_it_hits(pytester: pytest.Pytester, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -45,8 +45,16 @@ def test_a_full_disk_at_session_end_costs_only_the_outputs_it_hits(pytester: pyt
     pytester.makepyfile(test_suite=HEADER + TESTS)
     history, html, markdown = pytester.path / "history", pytester.path / "html", pytester.path / "md" / "report.md"
     monkeypatch.setenv("SAL_TEST_FULL", f"{history}:{html}")
-    options = ["-p", "no:cacheprovider", "-p", "no:hypothesispytest", f"--sal-cache-dir={pytester.path / 'cache'}",
-               f"--sal-history-dir={history}", f"--sal-report-html={html}", f"--sal-report-md={markdown}"]
+    options = [
+        "-p",
+        "no:cacheprovider",
+        "-p",
+        "no:hypothesispytest",
+        f"--sal-cache-dir={pytester.path / 'cache'}",
+        f"--sal-history-dir={history}",
+        f"--sal-report-html={html}",
+        f"--sal-report-md={markdown}",
+    ]
 
     full = pytester.runpytest_subprocess(*options, timeout=300)
 
@@ -57,8 +65,12 @@ def test_a_full_disk_at_session_end_costs_only_the_outputs_it_hits(pytester: pyt
     assert "pytest-sal robustness boundaries" in text  # the table is still printed
     lines = [line for line in text.splitlines() if "not written" in line]
     assert len(lines) == 2, text
-    assert lines[0].startswith(f"pytest-sal: history not written: cannot write {history}") and lines[0].endswith(": No space left on device")
-    assert lines[1].startswith(f"pytest-sal: --sal-report-html not written: cannot write {html}") and lines[1].endswith(": No space left on device")
+    assert lines[0].startswith(f"pytest-sal: history not written: cannot write {history}") and lines[0].endswith(
+        ": No space left on device"
+    )
+    assert lines[1].startswith(f"pytest-sal: --sal-report-html not written: cannot write {html}") and lines[1].endswith(
+        ": No space left on device"
+    )
     assert ".sal-tmp" not in lines[1]  # the report's file, not its staging copy
     assert markdown.is_file() and "test_fog" in markdown.read_text()  # what could be written was
     assert [line for line in text.splitlines() if "pytest-sal: wrote" in line] == ["pytest-sal: wrote md/report.md"]
@@ -70,6 +82,8 @@ def test_a_full_disk_at_session_end_costs_only_the_outputs_it_hits(pytester: pyt
     room.assert_outcomes(passed=1)
     assert "not written" not in output(room)
     assert sorted(line for line in output(room).splitlines() if "pytest-sal: wrote" in line) == [
-        f"pytest-sal: wrote history/{next(history.glob('*.json')).name}", "pytest-sal: wrote html/index.html", "pytest-sal: wrote md/report.md",
+        f"pytest-sal: wrote history/{next(history.glob('*.json')).name}",
+        "pytest-sal: wrote html/index.html",
+        "pytest-sal: wrote md/report.md",
     ]
     assert len(list(history.glob("*.json"))) == 1 and (html / "index.html").is_file()

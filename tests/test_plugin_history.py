@@ -22,7 +22,7 @@ from plugin_suites import (
 
 from pytest_sal.cli import main as cli
 
-HISTORY_TESTS = '''
+HISTORY_TESTS = """
 
 @sal.require(tracking_rate >= 0.5, fog.visibility_m >= 30, tolerance=1, max_trials=10)
 def test_worse(sal_outcome):
@@ -37,7 +37,7 @@ def test_better(sal_outcome):
 @sal.require(tracking_rate >= 0.5, fog.visibility_m >= 30, tolerance=1, max_trials=10)
 def test_same(sal_outcome):
     pass
-'''
+"""
 
 NAMES = ("test_worse", "test_better", "test_same")
 
@@ -90,8 +90,10 @@ def test_history_warm_start_and_compare_fail(pytester: pytest.Pytester, mode: li
             "*test_worse*",
             "regressed against the history (the requirement is met): tracking_rate >= 0.5 wherever fog.visibility_m >= 30 m",
             "  at fog.visibility_m = 30 m: *tracking_rate 0.6*",
-            ("*regression: fog.visibility_m boundary moved toward the requirement: passed down to "
-             f"{before_pass:.4g} m before, now only down to {now_pass:.4g} m (+* %, limit 10 %)"),
+            (
+                "*regression: fog.visibility_m boundary moved toward the requirement: passed down to "
+                f"{before_pass:.4g} m before, now only down to {now_pass:.4g} m (+* %, limit 10 %)"
+            ),
         ]
     )
     assert compared["test_worse"]["verdict"] == "passed" and compared["test_worse"]["regression"]
@@ -147,7 +149,12 @@ def test_compare_against_a_named_run_and_no_history(pytester: pytest.Pytester) -
     unknown = run(pytester, mode, "--sal-no-history", "--sal-compare=nightly")
     unknown.assert_outcomes(passed=1)
     has_line(unknown, "test_worse ", "no baseline", "passed")
-    has_line(unknown, "pytest-sal: 1 of 1 tests not compared with 'nightly' (passed without a comparison", "no run 'nightly' in the history", "0001 (baseline)")
+    has_line(
+        unknown,
+        "pytest-sal: 1 of 1 tests not compared with 'nightly' (passed without a comparison",
+        "no run 'nightly' in the history",
+        "0001 (baseline)",
+    )
     strict = run(pytester, mode, "--sal-no-history", "--sal-compare=nightly", "--sal-compare-missing=fail")
     strict.assert_outcomes(failed=1)
     has_line(strict, "test_worse ", "NO BASELINE", "FAILED")

@@ -8,7 +8,7 @@ from __future__ import annotations
 import pytest
 from plugin_suites import has_line, output, project, run
 
-LEVEL_TESTS = '''
+LEVEL_TESTS = """
 
 @sal.sweep(fog.visibility_m, L=100, M=30, H=10)
 @sal.require(tracking_rate >= 0.5)
@@ -24,9 +24,14 @@ def test_levels(sal_trial):
 @sal.require(tracking_rate >= 0.7)
 def test_point(sal_trial):
     assert sal_trial.metrics.tracking_rate == 0.75
-'''
+"""
 
-IDS = ["test_levels[L-fog.visibility_m=100]", "test_levels[M-fog.visibility_m=30]", "test_levels[H-fog.visibility_m=10]", "test_point[fog.visibility_m=30]"]
+IDS = [
+    "test_levels[L-fog.visibility_m=100]",
+    "test_levels[M-fog.visibility_m=30]",
+    "test_levels[H-fog.visibility_m=10]",
+    "test_point[fog.visibility_m=30]",
+]
 
 
 def test_level_names_in_ids_select_with_k(pytester: pytest.Pytester) -> None:

@@ -50,7 +50,7 @@ def sal_system(request):
     return Watching(request.node.name)
 '''
 
-TESTS = '''
+TESTS = """
 from pytest_sal import rpe_trans
 
 
@@ -62,7 +62,7 @@ def test_live(sal_outcome):
 @sal.require(tracking_rate >= 0.8, rpe_trans < 5, fog.visibility_m >= 25, max_trials=2)
 def test_live_fail(sal_outcome):
     pass
-'''
+"""
 
 NAMES = ("test_live", "test_live_fail")
 #: each test's trials (values, verdicts) on the 20-frame world: FakeSlam tracks round(20 v / 40) frames

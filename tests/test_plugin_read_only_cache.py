@@ -9,19 +9,19 @@ import pytest
 from faults import stamps
 from plugin_suites import calls, project, run
 
-TESTS = '''
+TESTS = """
 @sal.require(tracking_rate >= 0.5, fog.visibility_m >= 25)
 def test_fog(sal_outcome):
     pass
-'''
+"""
 
 #: the inner session's cache is a read-only mount (simulated: root ignores file modes)
-READ_ONLY = f'''
+READ_ONLY = f"""
 import sys
 sys.path.insert(0, {str(Path(__file__).parent)!r})
 from faults import refuse_writes_under
 refuse_writes_under(HERE / "cache")
-'''
+"""
 
 
 def test_a_read_only_cache_serves_a_session(pytester: pytest.Pytester) -> None:
@@ -42,4 +42,6 @@ def test_a_read_only_cache_serves_a_session(pytester: pytest.Pytester) -> None:
     assert calls(pytester) > runs  # test_fog_30's new trials ran, and were not stored
     assert stamps(pytester.path / "cache") == before
     text = result.stdout.str()
-    assert text.count("is read-only (Read-only file system): the entries it holds are used, new results are computed and not stored") == 1, text
+    assert (
+        text.count("is read-only (Read-only file system): the entries it holds are used, new results are computed and not stored") == 1
+    ), text

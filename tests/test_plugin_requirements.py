@@ -35,7 +35,7 @@ from plugin_suites import (
 )
 
 # -- 1-3, 11, 12: verdicts, boundaries, the summary table, JUnit properties, reports ------------
-VERDICT_TESTS = '''
+VERDICT_TESTS = """
 
 @sal.require(tracking_rate >= 0.5, fog.visibility_m >= 25, tolerance=1)
 def test_pass(sal_outcome):
@@ -62,7 +62,7 @@ def test_passes_everywhere(sal_outcome):
 @sal.require(tracking_rate >= 0.5, fog.visibility_m >= 25)
 def test_fails_everywhere(sal_outcome):
     raise AssertionError("BODY-RAN")
-'''
+"""
 
 
 @pytest.mark.parametrize("mode", MODES)
@@ -116,7 +116,9 @@ def test_verdicts_boundaries_summary_junit_and_reports(pytester: pytest.Pytester
     # 11. JUnit properties of every robustness test
     props = junit(pytester.path / "out.xml")
     assert {k: props["test_pass"][k] for k in ("sal_boundary_pass", "sal_boundary_fail", "sal_trials")} == {
-        "sal_boundary_pass": "20", "sal_boundary_fail": "19.375", "sal_trials": "8",
+        "sal_boundary_pass": "20",
+        "sal_boundary_fail": "19.375",
+        "sal_trials": "8",
     }
     assert props["test_fail"]["sal_boundary_pass"] == f"{pass_end:g}" and props["test_fail"]["sal_trials"] == "8"
     assert props["test_passes_everywhere"]["sal_boundary_fail"] == "" and props["test_passes_everywhere"]["sal_trials"] == "2"
@@ -138,12 +140,17 @@ def test_verdicts_boundaries_summary_junit_and_reports(pytester: pytest.Pytester
     # 13. the summary ends naming each file written, as given on the command line or from the cwd
     (history,) = (pytester.path / "history").glob("*.json")
     result.stdout.fnmatch_lines(
-        ["*pytest-sal robustness boundaries*", f"pytest-sal: wrote history/{history.name}", "pytest-sal: wrote summary.md", "pytest-sal: wrote html/index.html"]
+        [
+            "*pytest-sal robustness boundaries*",
+            f"pytest-sal: wrote history/{history.name}",
+            "pytest-sal: wrote summary.md",
+            "pytest-sal: wrote html/index.html",
+        ]
     )
 
 
 # -- 4: flaky --------------------------------------------------------------------------------
-FLAKY_TESTS = '''
+FLAKY_TESTS = """
 
 @sal.require(tracking_rate >= 0.46, fog.visibility_m >= 18)
 def test_flaky(sal_outcome):
@@ -155,7 +162,7 @@ def test_near_but_steady(sal_outcome):
     first = sal_outcome.trials[0]
     assert first.value == 20 and len(first.runs) == 1  # a deterministic system: one run per trial
     assert first.metrics["tracking_rate"] == 0.5 and sal_outcome.verdict == "passed"
-'''
+"""
 
 
 @pytest.mark.parametrize("mode", MODES)
@@ -169,8 +176,10 @@ def test_flaky_edge_fails_the_test(pytester: pytest.Pytester, mode: list[str]) -
     assert "BODY-RAN" not in output(result)
     result.stdout.fnmatch_lines(
         [
-            ("*FLAKY: tracking_rate >= 0.46 wherever fog.visibility_m >= 18 m: at the edge fog.visibility_m = 18 m "
-             "the runs disagree (3 passed, 4 failed): the edge sits on the system's failure boundary"),
+            (
+                "*FLAKY: tracking_rate >= 0.46 wherever fog.visibility_m >= 18 m: at the edge fog.visibility_m = 18 m "
+                "the runs disagree (3 passed, 4 failed): the edge sits on the system's failure boundary"
+            ),
             "*reproduce: @sal.at(fog.visibility_m, 18)*",
         ]
     )
@@ -191,7 +200,7 @@ def test_flaky_edge_fails_the_test(pytester: pytest.Pytester, mode: list[str]) -
 
 
 # -- 5: the trial cache ----------------------------------------------------------------------
-CACHE_TESTS = '''
+CACHE_TESTS = """
 
 @sal.require(tracking_rate >= 0.5, fog.visibility_m >= 25, tolerance=1)
 def test_meets(sal_outcome):
@@ -201,7 +210,7 @@ def test_meets(sal_outcome):
 @sal.require(tracking_rate >= 0.8, fog.visibility_m >= 25)
 def test_misses(sal_outcome):
     pass
-'''
+"""
 
 
 @pytest.mark.parametrize("mode", MODES)
@@ -226,7 +235,9 @@ def test_second_run_reads_every_trial_from_the_cache(pytester: pytest.Pytester, 
         assert all(t["cached"] for t in outcome["trials"])
         same = ("verdict", "boundary", "termination", "margin", "requirement")
         assert {k: outcome[k] for k in same} == {k: cold[name][k] for k in same}
-        assert [(t["value"], t["passed"], t["metrics"]) for t in outcome["trials"]] == [(t["value"], t["passed"], t["metrics"]) for t in cold[name]["trials"]]
+        assert [(t["value"], t["passed"], t["metrics"]) for t in outcome["trials"]] == [
+            (t["value"], t["passed"], t["metrics"]) for t in cold[name]["trials"]
+        ]
     spent = {name: [sum(t["wall_time_s"] for t in o["trials"]) for o in (cold[name], warm[name])] for name in cold}
     assert all(warm_s < cold_s for cold_s, warm_s in spent.values()), spent
     n_meets = len(cold["test_meets"]["trials"])
@@ -240,7 +251,7 @@ def test_second_run_reads_every_trial_from_the_cache(pytester: pytest.Pytester, 
 
 
 # -- 8, 9: sweep levels, explicit points, the sal mark ---------------------------------------
-SWEEP_TESTS = '''
+SWEEP_TESTS = """
 
 @sal.sweep(fog.visibility_m, L=100, M=30, H=10)
 @sal.require(tracking_rate >= 0.5)
@@ -263,7 +274,7 @@ def test_search(sal_outcome):
 
 def test_plain():
     pass
-'''
+"""
 
 
 @pytest.mark.parametrize("mode", MODES)
@@ -289,8 +300,11 @@ def test_sweep_items_per_level_and_the_sal_mark(pytester: pytest.Pytester, mode:
     assert props["test_levels[H-fog.visibility_m=10]"]["sal_boundary_fail"] == "10"
     assert props["test_levels[L-fog.visibility_m=100]"]["sal_boundary_pass"] == "100"
     assert {name: p["sal_trials"] for name, p in props.items()} == {
-        "test_levels[L-fog.visibility_m=100]": "1", "test_levels[M-fog.visibility_m=30]": "1", "test_levels[H-fog.visibility_m=10]": "1",
-        "test_point[fog.visibility_m=30]": "1", "test_search": "2",
+        "test_levels[L-fog.visibility_m=100]": "1",
+        "test_levels[M-fog.visibility_m=30]": "1",
+        "test_levels[H-fog.visibility_m=10]": "1",
+        "test_point[fog.visibility_m=30]": "1",
+        "test_search": "2",
     }
     # trials at the same value are shared (the point and level M; the search's edge and level L)
     assert calls(pytester) == 4
@@ -303,7 +317,8 @@ def test_sweep_items_per_level_and_the_sal_mark(pytester: pytest.Pytester, mode:
 
 
 # -- 10: one item per system -----------------------------------------------------------------
-SYSTEMS_CONFTEST = '''
+SYSTEMS_CONFTEST = (
+    """
 import pytest
 from pytest_sal.testing import FakeSlam
 
@@ -311,18 +326,23 @@ from pytest_sal.testing import FakeSlam
 @pytest.fixture(params=["min(1, v / 40)", "min(1, v / 20)"], ids=["slow", "fast"])
 def sal_system(request):
     return FakeSlam(tracked=request.param)
-''' + SMALL_DATASET
+"""
+    + SMALL_DATASET
+)
 
 
 @pytest.mark.parametrize("mode", MODES)
 def test_parametrised_system_gives_one_item_and_boundary_per_system(pytester: pytest.Pytester, mode: list[str]) -> None:
     pytester.makeconftest(SYSTEMS_CONFTEST)
-    pytester.makepyfile(test_suite=HEADER + '''
+    pytester.makepyfile(
+        test_suite=HEADER
+        + """
 
 @sal.require(tracking_rate >= 0.5, fog.visibility_m >= 25, tolerance=1)
 def test_fog(sal_outcome):
     pass
-''')
+"""
+    )
     result = run(pytester, mode, "-v", "--junitxml=out.xml")
     result.assert_outcomes(passed=2)
     found = outcomes(pytester.path / "out.xml")
@@ -331,12 +351,16 @@ def test_fog(sal_outcome):
     check_bracket(found["test_fog[fast]"], predicted(share=lambda v: v / 20), tolerance=1)  # from 9.5 m on
     assert found["test_fog[fast]"]["boundary"]["pass_value"] <= 10 and found["test_fog[slow]"]["boundary"]["fail_value"] >= 18
     for name, outcome in found.items():
-        has_line(result, name, f"PASSED (fog.visibility_m boundary {outcome['boundary']['fail_value']:.4g}-{outcome['boundary']['pass_value']:.4g} m)")
+        has_line(
+            result,
+            name,
+            f"PASSED (fog.visibility_m boundary {outcome['boundary']['fail_value']:.4g}-{outcome['boundary']['pass_value']:.4g} m)",
+        )
         has_line(result, f"{name} ", "fake", "passed")
 
 
 # -- 14: a real ORB-SLAM3 run through the plugin ---------------------------------------------
-ORB_CONFTEST = '''
+ORB_CONFTEST = """
 import os
 
 import pytest
@@ -346,14 +370,16 @@ from sal_wrappers import create
 @pytest.fixture
 def sal_system():
     return create("orbslam3", vocabulary=os.environ["SAL_ORB_VOCABULARY"])
-'''
+"""
 
 
 @pytest.mark.skipif(importlib.util.find_spec("pyorbslam3") is None, reason="pyorbslam3 is not installed")
 def test_orbslam3_through_the_plugin(pytester: pytest.Pytester, monkeypatch: pytest.MonkeyPatch, orb_vocabulary: Path) -> None:
     monkeypatch.setenv("SAL_ORB_VOCABULARY", str(orb_vocabulary))
     pytester.makeconftest(ORB_CONFTEST)
-    pytester.makepyfile(test_orb=HEADER + '''
+    pytester.makepyfile(
+        test_orb=HEADER
+        + """
 
 @sal.require(tracking_rate >= 0.5, fog.visibility_m >= 200, max_trials=2)
 def test_mild_fog(sal_outcome):
@@ -362,7 +388,8 @@ def test_mild_fog(sal_outcome):
     assert edge.value == 200 and edge.passed and not edge.cached
     assert edge.runs[0]["tracking_rate"] > 0.5
     assert len(sal_outcome.trials) == 2
-''')
+"""
+    )
     result = run(pytester, [], "-v", "--junitxml=out.xml")
     result.assert_outcomes(passed=1)
     found = outcomes(pytester.path / "out.xml")["test_mild_fog"]

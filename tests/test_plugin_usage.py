@@ -14,8 +14,10 @@ IMPORT_ERRORS = {
     ),
     "test_two_envelopes": (
         "@sal.require(tracking_rate >= 0.5, fog.visibility_m >= 25, rain.intensity_mm_h <= 10)\ndef test_x(sal_outcome): pass\n",
-        ("*sal.require() searches one parameter; got 2 envelopes (fog.visibility_m >= 25 m, rain.intensity_mm_h <= 10 mm/h). "
-         "Write one test per parameter, or chain the modules*"),
+        (
+            "*sal.require() searches one parameter; got 2 envelopes (fog.visibility_m >= 25 m, rain.intensity_mm_h <= 10 mm/h). "
+            "Write one test per parameter, or chain the modules*"
+        ),
     ),
     "test_metric_vs_string": (
         "@sal.require(tracking_rate >= 'high', fog.visibility_m >= 25)\ndef test_x(sal_outcome): pass\n",
@@ -34,8 +36,10 @@ SESSION_ERRORS = {  # reported once every item is collected
     ),
     "require_without_envelope": (
         "@sal.require(tracking_rate >= 0.5)\ndef test_x(sal_outcome): pass\n",
-        ("*test_suite.py::test_x: InvalidRequirement: sal.require(tracking_rate >= 0.5) has no parameter bound to search; "
-         "add one (fog.visibility_m >= 25) or put sal.sweep(...) / sal.at(...) above it*"),
+        (
+            "*test_suite.py::test_x: InvalidRequirement: sal.require(tracking_rate >= 0.5) has no parameter bound to search; "
+            "add one (fog.visibility_m >= 25) or put sal.sweep(...) / sal.at(...) above it*"
+        ),
     ),
     "sweep_with_envelope": (
         "@sal.sweep(fog.visibility_m, L=100)\n@sal.require(tracking_rate >= 0.5, fog.visibility_m >= 25)\ndef test_x(sal_trial): pass\n",
@@ -67,7 +71,7 @@ def test_misuse_of_marks_is_a_usage_error_saying_what_to_write(pytester: pytest.
         for case, (_, message) in SESSION_ERRORS.items():
             result.stdout.fnmatch_lines([message.replace("test_suite.py", f"test_{case}.py")])
     else:  # a UsageError: the session stops before running anything
-        for case, (body, message) in SESSION_ERRORS.items():
+        for body, message in SESSION_ERRORS.values():
             path = pytester.makepyfile(test_suite=HEADER + body)
             result = run(pytester, mode)
             assert result.ret == pytest.ExitCode.USAGE_ERROR
@@ -122,8 +126,14 @@ def test_a_bad_ini_value_is_a_usage_error_naming_the_option(pytester: pytest.Pyt
 
 
 BAD_OUTPUTS = [
-    ("--sal-history-dir=/dev/null/x", "history folder (--sal-history-dir, ini sal_history_dir) /dev/null/x: /dev/null is not a folder, so /dev/null/x cannot be created; give another folder"),
-    ("--sal-cache-dir=/dev/null/x", "cache folder (--sal-cache-dir, ini sal_cache_dir) /dev/null/x: /dev/null is not a folder, so /dev/null/x cannot be created; give another folder"),
+    (
+        "--sal-history-dir=/dev/null/x",
+        "history folder (--sal-history-dir, ini sal_history_dir) /dev/null/x: /dev/null is not a folder, so /dev/null/x cannot be created; give another folder",
+    ),
+    (
+        "--sal-cache-dir=/dev/null/x",
+        "cache folder (--sal-cache-dir, ini sal_cache_dir) /dev/null/x: /dev/null is not a folder, so /dev/null/x cannot be created; give another folder",
+    ),
     ("--sal-report-html=/dev/null", "--sal-report-html /dev/null: /dev/null exists and is not a folder; give another folder"),
     ("--sal-report-md={tmp}", "--sal-report-md {tmp}: {tmp} is a folder; give another file"),
     ("-o sal_system=nosuch", "ini option sal_system = 'nosuch': unknown SLAM system; known: command, orbslam3, reference_vo"),
@@ -148,7 +158,12 @@ def test_a_missing_baseline_is_said_and_fails_only_when_asked(pytester: pytest.P
     pytester.makepyfile(test_suite=HEADER + "@sal.require(tracking_rate >= 0.5, fog.visibility_m >= 25)\ndef test_x(sal_outcome): pass\n")
     empty = run(pytester, [], "--sal-compare")  # no history yet: nothing to compare, and it says so
     assert empty.ret == pytest.ExitCode.OK
-    has_line(empty, "pytest-sal: 1 of 1 tests not compared with 'main'", f"no run 'main' in the history {pytester.path / 'history'}", "latest runs: none yet")
+    has_line(
+        empty,
+        "pytest-sal: 1 of 1 tests not compared with 'main'",
+        f"no run 'main' in the history {pytester.path / 'history'}",
+        "latest runs: none yet",
+    )
     assert run(pytester, [], "--sal-compare", "--sal-compare-missing=fail").ret == pytest.ExitCode.TESTS_FAILED
     pytester.makeini("[pytest]\nsal_compare_missing = fail\n")
     assert run(pytester, [], "--sal-compare=nightly").ret == pytest.ExitCode.TESTS_FAILED  # the ini says fail
@@ -172,7 +187,9 @@ def test_a_path_option_written_with_a_space_is_refused_with_the_reason(pytester:
     target.mkdir(exist_ok=True)
     result = pytester.runpytest("-p", "no:cacheprovider", option, str(target))
     assert result.ret == pytest.ExitCode.USAGE_ERROR
-    result.stderr.fnmatch_lines([f"ERROR: pytest-sal: write {option}={target} with '=': given as two words, pytest takes {target} for a test path*"])
+    result.stderr.fnmatch_lines(
+        [f"ERROR: pytest-sal: write {option}={target} with '=': given as two words, pytest takes {target} for a test path*"]
+    )
     assert calls(pytester) == 0
     if option != "--sal-report-md":  # the same path with '=': the project's ini and test ids hold
         kept = run(pytester, [], f"{option}={target}", "-v")
@@ -189,7 +206,9 @@ def test_more_orbslam3_workers_than_cores_is_said_at_the_start(pytester: pytest.
     monkeypatch.setattr(sal_wrappers.pacing, "machine_load", lambda: {"loadavg": [9.3, 9.0, 8.0], "cpus": 2, "usable_cpus": 2})
     pytester.makepyfile(test_plain="def test_x():\n    pass\n")
     said = pytester.runpytest("-p", "no:cacheprovider", "--sal-no-history", "-o", "sal_system=orbslam3")
-    said.stdout.fnmatch_lines(["pytest-sal: 1 worker(s) x ORB-SLAM3 (about 1.5 cores each) on 2 cores with load average 9.3*re-paced and marked*"])
+    said.stdout.fnmatch_lines(
+        ["pytest-sal: 1 worker(s) x ORB-SLAM3 (about 1.5 cores each) on 2 cores with load average 9.3*re-paced and marked*"]
+    )
     quiet = pytester.runpytest("-p", "no:cacheprovider", "--sal-no-history", "-o", "sal_system=reference_vo")
     assert "ORB-SLAM3" not in quiet.stdout.str()  # another system: nothing to say
     monkeypatch.setattr(sal_wrappers.pacing, "machine_load", lambda: {"loadavg": [0.2, 0.2, 0.2], "cpus": 16, "usable_cpus": 16})

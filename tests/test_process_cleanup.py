@@ -24,7 +24,6 @@ import pytest
 
 from sal_adapters import open_dataset
 from sal_wrappers import create
-from sal_wrappers.child_process import run_child
 from sal_wrappers.process_group import run_process_group
 
 pytestmark = pytest.mark.skipif(not Path("/proc/self/environ").is_file(), reason="finding the processes a run leaves needs Linux's /proc")
@@ -146,7 +145,7 @@ def marked(marker: str) -> list[int]:
     return found
 
 
-def wait_for(check, seconds: float, what: str) -> None:  # noqa: ANN001 - a predicate
+def wait_for(check, seconds: float, what: str) -> None:
     deadline = time.monotonic() + seconds
     while not check():
         if time.monotonic() > deadline:
@@ -195,8 +194,18 @@ def test_a_killed_pytest_session_leaves_no_slam_process(tmp_path: Path, marker: 
     (tmp_path / "program.py").write_text(PROGRAM)
     (tmp_path / "conftest.py").write_text(INNER_CONFTEST.format(marker=marker, what=what))
     (tmp_path / "test_inner.py").write_text(INNER_TEST)
-    argv = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-p", "no:hypothesispytest",
-            f"--sal-cache-dir={tmp_path / 'cache'}", f"--sal-history-dir={tmp_path / 'history'}"]
+    argv = [
+        sys.executable,
+        "-m",
+        "pytest",
+        "-q",
+        "-p",
+        "no:cacheprovider",
+        "-p",
+        "no:hypothesispytest",
+        f"--sal-cache-dir={tmp_path / 'cache'}",
+        f"--sal-history-dir={tmp_path / 'history'}",
+    ]
     session = start(argv, tmp_path, tmp_path / "pytest.log")
     try:
         wait_for(lambda: (tmp_path / "ready").exists() or session.poll() is not None, 60, "the SLAM program did not start")
@@ -215,7 +224,11 @@ def test_run_child_leaves_nothing(tmp_path: Path, marker: str, outcome: str) -> 
     (tmp_path / "leaky_entry.py").write_text(LEAKY_ENTRY)
     ready = tmp_path / "ready"
     exits = outcome == "exits"
-    parent = start([sys.executable, "parent.py", marker, str(tmp_path / "w"), str(ready), *(["--exit"] if exits else [])], tmp_path, tmp_path / "parent.log")
+    parent = start(
+        [sys.executable, "parent.py", marker, str(tmp_path / "w"), str(ready), *(["--exit"] if exits else [])],
+        tmp_path,
+        tmp_path / "parent.log",
+    )
     try:
         wait_for(lambda: ready.exists() or parent.poll() is not None, 30, "the child did not start")
         if exits:
@@ -234,7 +247,16 @@ def test_run_child_leaves_nothing(tmp_path: Path, marker: str, outcome: str) -> 
 def test_a_passing_run_leaves_no_double_forked_daemon(tmp_path: Path, marker: str) -> None:
     (tmp_path / "program.py").write_text(PROGRAM)
     sequence = open_dataset("synthetic", scene="indoor", frames=4, sensor="rgbd")
-    argv = [sys.executable, str(tmp_path / "program.py"), str(tmp_path / "ready"), marker, "--daemon", "--trajectory", "{sequence}", "{output}"]
+    argv = [
+        sys.executable,
+        str(tmp_path / "program.py"),
+        str(tmp_path / "ready"),
+        marker,
+        "--daemon",
+        "--trajectory",
+        "{sequence}",
+        "{output}",
+    ]
     result = create("command", argv=argv, layout="tum").run(sequence, tmp_path / "w", timeout=60)
     assert result.ok and result.tracked == 4, result.summary()
     assert_none_left(marker, seconds=0.5)

@@ -17,7 +17,7 @@ from plugin_suites import project, run
 
 pytest.importorskip("pytest_html", reason="pytest-html is an optional integration (the test extra installs it)")
 
-SUITE = '''
+SUITE = """
 
 @sal.require(tracking_rate >= 0.5, fog.visibility_m >= 25, tolerance=4)
 def test_search(sal_outcome):
@@ -32,7 +32,7 @@ def test_level(sal_trial):
 
 def test_plain():
     pass
-'''
+"""
 
 PNG = re.compile(r"<img src='data:image/png;base64,([A-Za-z0-9+/=]+)' alt='([^']*)'")
 
@@ -42,7 +42,10 @@ def rows(report: Path) -> dict[str, str]:
     blob = re.search(r'id="data-container"\s+data-jsonblob="([^"]*)"', report.read_text())
     assert blob, "no data-jsonblob in the pytest-html report"
     tests: dict[str, list[dict[str, Any]]] = json.loads(html.unescape(blob.group(1)))["tests"]
-    return {nodeid.split("::")[-1]: "".join(e["content"] for r in found for e in r.get("extras", []) if e["format_type"] == "html") for nodeid, found in tests.items()}
+    return {
+        nodeid.split("::")[-1]: "".join(e["content"] for r in found for e in r.get("extras", []) if e["format_type"] == "html")
+        for nodeid, found in tests.items()
+    }
 
 
 @pytest.mark.parametrize("mode", [pytest.param([], id="serial"), pytest.param(["-n", "2"], id="xdist")])
@@ -56,7 +59,11 @@ def test_robustness_rows_carry_boundary_plot_and_frames(pytester: pytest.Pyteste
     search = found["test_search"]
     assert "<b>fog.visibility_m</b> boundary 17.5-20 m (tolerance); tracking_rate &gt;= 0.5 wherever fog.visibility_m &gt;= 25 m" in search
     images = PNG.findall(search)
-    assert [alt for _, alt in images] == ["fog.visibility_m against the metrics", "frame at last pass: 20 m (pass)", "frame at first fail: 17.5 m (fail)"]
+    assert [alt for _, alt in images] == [
+        "fog.visibility_m against the metrics",
+        "frame at last pass: 20 m (pass)",
+        "frame at first fail: 17.5 m (fail)",
+    ]
     for data, _ in images:
         png = base64.b64decode(data, validate=True)
         assert png.startswith(b"\x89PNG\r\n\x1a\n") and len(png) > 1000

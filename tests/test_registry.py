@@ -16,7 +16,10 @@ def test_unknown_option_lists_what_is_allowed(shared_data):
     assert "unknown option 'sequense' for dataset kind 'kitti'; allowed: start, max_frames, sequence, stereo, color" in str(info.value)
 
 
-@pytest.mark.parametrize(("start", "max_frames", "message"), [(-1, None, "start must be >= 0"), (0, 0, "max_frames must be >= 1"), (500, None, "start=500 is past the last frame")])
+@pytest.mark.parametrize(
+    ("start", "max_frames", "message"),
+    [(-1, None, "start must be >= 0"), (0, 0, "max_frames must be >= 1"), (500, None, "start=500 is past the last frame")],
+)
 def test_window_options_are_checked(shared_data, start, max_frames, message):
     with pytest.raises(DatasetError, match=message):
         open_dataset("kitti", shared_data / "kitti", sequence="07", start=start, max_frames=max_frames)

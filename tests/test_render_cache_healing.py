@@ -109,7 +109,9 @@ def test_a_dry_run_renders_a_damaged_frame_in_memory_and_leaves_the_file(tmp_pat
         sequence = rendered(tmp_path, "cache", "indoor", "rgbd")
         image, messages = cache_warnings(lambda: sequence[FRAME].image)
         again, repeated = cache_warnings(lambda: sequence[FRAME].image)
-    assert messages == [f"{path}: bad cached frame, ignored (nothing is stored) and rendered again: cannot decode image (corrupt or not an image)"]
+    assert messages == [
+        f"{path}: bad cached frame, ignored (nothing is stored) and rendered again: cannot decode image (corrupt or not an image)"
+    ]
     assert repeated == []  # one warning per file
     assert np.array_equal(image, fresh) and np.array_equal(again, fresh)
     assert path.read_bytes() == b""

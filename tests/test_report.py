@@ -12,6 +12,7 @@ from browser import find_picture, needs_chromium, screenshot
 
 from pytest_sal.engine.outcome import Boundary, Outcome, Trial
 from pytest_sal.report.formatting import short_id
+from pytest_sal.report.html import esc, metric_figure
 from pytest_sal.report.outcome_report import (
     headline,
     markdown_report,
@@ -21,7 +22,6 @@ from pytest_sal.report.outcome_report import (
     write_html_report,
     write_markdown,
 )
-from pytest_sal.report.html import esc, metric_figure
 
 FOG_REQ = "ate_rmse < 1.5 m and tracking_rate >= 0.9 wherever fog.visibility_m >= 25 m"
 XSS_ID = "tests/robustness/test_weather.py::test_rain[<script>alert(1)</script>]"
@@ -130,7 +130,12 @@ def regressed() -> Outcome:
         verdict="passed",
         boundary=Boundary(19.0, 20.0, "%"),
         termination="tolerance",
-        trials=[Trial(10.0, True, m(0.1, 0.95)), Trial(19.0, True, m(0.2, 0.82)), Trial(20.0, False, m(0.3, 0.7)), Trial(18.0, True, m(0.2, 0.85))],
+        trials=[
+            Trial(10.0, True, m(0.1, 0.95)),
+            Trial(19.0, True, m(0.2, 0.82)),
+            Trial(20.0, False, m(0.3, 0.7)),
+            Trial(18.0, True, m(0.2, 0.85)),
+        ],
         margin=9.0,
         previous=Boundary(30.0, 35.0, "%"),
         regression="boundary moved from 30-35 % to 19-20 %, more than the tolerance (2 %)",
@@ -180,7 +185,14 @@ def test_summary_rows_hold_every_column(outcomes: list[Outcome]) -> None:
     assert (f["boundary"], f["trials"], f["margin"], f["verdict"]) == ("13.67-15.12 m", "6 (6 cached)", "+9.88 m", "passed")
     assert f["change"] == "+1.61 m"  # midpoint 16 -> 14.395 m: towards the severe side (lower visibility)
     r = rows[XSS_ID]
-    assert (r["requirement"], r["boundary"], r["trials"], r["margin"], r["change"], r["verdict"]) == ("<= 20 mm/h", "12.5-15 mm/h", "5", "-7.5 mm/h", "-", "FAILED")
+    assert (r["requirement"], r["boundary"], r["trials"], r["margin"], r["change"], r["verdict"]) == (
+        "<= 20 mm/h",
+        "12.5-15 mm/h",
+        "5",
+        "-7.5 mm/h",
+        "-",
+        "FAILED",
+    )
     assert rows["tests/test_motion.py::test_blur"]["verdict"] == "FLAKY"
     assert rows["tests/test_motion.py::test_blur"]["margin"] == "±0 px"
     d = rows["tests/test_transport.py::test_drop"]

@@ -10,8 +10,8 @@ import pytest
 
 import pytest_sal as sal
 from pytest_sal import InvalidRequirement, ate_rmse, tracking_rate
-from pytest_sal.engine.requirements import Requirement
 from pytest_sal.engine.boundary_search import SearchSpace, boundary_search
+from pytest_sal.engine.requirements import Requirement
 from pytest_sal.engine.trial_runner import VotePolicy
 from sal_modules import fog, frame_drop, motion_blur, night, rain, sensor_noise
 
@@ -157,7 +157,9 @@ def test_votes_make_a_noisy_boundary_reproducible_where_one_run_is_not() -> None
         for seed in range(20):
             system = VotingSystem(14.3, 1 / 6, seed, policy)
             judge = system if policy.noisy else None
-            r = boundary_search(system.evaluate, SearchSpace(mild=100.0, severe=1.0), edge=25, rel_tolerance=0.1, max_trials=10, judge=judge)
+            r = boundary_search(
+                system.evaluate, SearchSpace(mild=100.0, severe=1.0), edge=25, rel_tolerance=0.1, max_trials=10, judge=judge
+            )
             found.append((r.fail_value, r.pass_value, system.runs))
         return found
 
@@ -220,7 +222,7 @@ def test_an_edge_that_cannot_change_the_frames_is_refused(bound, reason: str) ->
 def test_a_geometric_search_speaks_the_parameter_unit_and_a_relative_tolerance_suits_decades() -> None:
     # bandwidth 0.01 .. 200 Mbit/s, the system fails below 0.085: the old absolute default
     # (10 % of the 1 Mbit/s edge) stopped at 0.01-0.1 after 3 trials
-    evaluate, asked = threshold_system(0.085)
+    evaluate, _asked = threshold_system(0.085)
     space = SearchSpace(mild=200.0, severe=0.01, scale="log")
     result = boundary_search(evaluate, space, edge=1.0, rel_tolerance=0.1, max_trials=20)
     assert result.fail_value < 0.085 <= result.pass_value and result.pass_value / result.fail_value <= 1.1 + 1e-9
@@ -251,10 +253,14 @@ def test_misuse_says_what_to_write_instead(items, message: str) -> None:
         (lambda: ate_rmse >= 0, "ate_rmse >= 0 m always holds, so it tests nothing: ate_rmse is 0 m or more"),
         (lambda: tracking_rate >= 1.5, "tracking_rate >= 1.5 can never hold: tracking_rate is 0 .. 1"),
         (lambda: tracking_rate <= 1, "tracking_rate <= 1 always holds, so it tests nothing: tracking_rate is 0 .. 1"),
-        (lambda: sal.require(ate_rmse < 1, fog.visibility_m >= 25, search_range=(0.1, 30)),
-         "search_range (0.1, 30) m leaves the valid range of fog.visibility_m, 1 .. 100000 m"),
-        (lambda: sal.require(ate_rmse < 1, fog.visibility_m >= 25, search_range=(30, 30)),
-         "search_range (30, 30) must be two finite numbers low < high, in m"),
+        (
+            lambda: sal.require(ate_rmse < 1, fog.visibility_m >= 25, search_range=(0.1, 30)),
+            "search_range (0.1, 30) m leaves the valid range of fog.visibility_m, 1 .. 100000 m",
+        ),
+        (
+            lambda: sal.require(ate_rmse < 1, fog.visibility_m >= 25, search_range=(30, 30)),
+            "search_range (30, 30) must be two finite numbers low < high, in m",
+        ),
     ],
     ids=["ate<0", "ate>=0", "rate>=1.5", "rate<=1", "range-outside", "range-empty"],
 )
@@ -290,5 +296,8 @@ def test_sal_at_and_sweep_values_are_the_module_values_in_its_unit() -> None:
     ref, levels = test_iso.sal_levels
     assert [ref.module(v).iso for v in levels.values()] == [200.0, 6400.0]
     assert sal.sweep(sensor_noise.iso, L=50)  # below the search range, still a valid ISO
-    with pytest.raises(InvalidRequirement, match=r"sal.sweep level L: sensor_noise.iso: iso = 5.0 ISO is not valid; .* must be a number in 25 .. 409600 ISO"):
+    with pytest.raises(
+        InvalidRequirement,
+        match=r"sal.sweep level L: sensor_noise.iso: iso = 5.0 ISO is not valid; .* must be a number in 25 .. 409600 ISO",
+    ):
         sal.sweep(sensor_noise.iso, L=5)

@@ -45,7 +45,9 @@ def test_a_misspelt_parameter_of_a_chain() -> None:
 
 
 def test_a_misspelt_module_name() -> None:
-    with pytest.raises(PluginError, match=r"^unknown perturbation module 'fgo'; did you mean 'fog'\? \(entry-point group 'sal.perturbations'\)$"):
+    with pytest.raises(
+        PluginError, match=r"^unknown perturbation module 'fgo'; did you mean 'fog'\? \(entry-point group 'sal.perturbations'\)$"
+    ):
         module_class("fgo")
     with pytest.raises(PluginError, match=r"unknown perturbation module 'xyz'; known: bandwidth, .*fog.*"):
         create("xyz")

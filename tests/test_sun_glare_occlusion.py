@@ -5,7 +5,7 @@ source is an error that names the providers."""
 from __future__ import annotations
 
 import math
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +21,7 @@ from sal_modules.light.sun_glare import GHOST_FADE_DEG, sky_mask, sun_direction
 KLUX = 50.0  # the issue's low sun
 
 
-@lru_cache(maxsize=None)
+@cache
 def street() -> Sequence:
     """The synthetic street seen by a stereo pair, with exact depth (0 = sky)."""
     return open_dataset("synthetic", scene="urban", frames=5, sensor="stereo")

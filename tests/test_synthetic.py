@@ -318,7 +318,7 @@ def test_concurrent_renders_of_one_frame_are_harmless(tmp_path: Path) -> None:
         thread.join()
     assert len(results) == 4 and all(np.array_equal(r, results[0]) for r in results)
     assert np.array_equal(store.left(3), results[0])
-    assert not [p for p in tmp_path.rglob(".*")]  # no temporary file left behind
+    assert not list(tmp_path.rglob(".*"))  # no temporary file left behind
 
 
 def test_render_cache_folder_opens_as_a_dataset(tmp_path: Path) -> None:
@@ -385,13 +385,21 @@ def test_round_trip_of_a_foreign_sequence(tmp_path: Path) -> None:
     images = [rng.integers(0, 256, (8, 10, 3), dtype=np.uint8) for _ in range(3)]
     depths = [rng.uniform(0.5, 4, (8, 10)).astype(np.float32), None, rng.uniform(0.5, 4, (8, 10)).astype(np.float32)]
     records = [
-        FrameRecord(index=10 + 3 * k, timestamp=1403715274.1 + 0.05 * k, stem=f"cam-{k}", image=lambda k=k: images[k],
-                    depth=None if depths[k] is None else (lambda k=k: depths[k]), timestamp_ns=1403715274100000000 + 50000000 * k)
+        FrameRecord(
+            index=10 + 3 * k,
+            timestamp=1403715274.1 + 0.05 * k,
+            stem=f"cam-{k}",
+            image=lambda k=k: images[k],
+            depth=None if depths[k] is None else (lambda k=k: depths[k]),
+            timestamp_ns=1403715274100000000 + 50000000 * k,
+        )
         for k in range(3)
     ]
     t = np.linspace(1403715274.0, 1403715274.3, 31)
     gt = Trajectory(t, np.c_[t - t[0], np.zeros(31), np.zeros(31)], np.tile([0, 0, 0, 1.0], (31, 1)))
-    seq = Sequence(kind="custom", name="custom/x", camera=Camera(20.0, 20.0, 5.0, 4.0, 10, 8), sensor="mono", fps=20.0, records=records, groundtruth=gt)
+    seq = Sequence(
+        kind="custom", name="custom/x", camera=Camera(20.0, 20.0, 5.0, 4.0, 10, 8), sensor="mono", fps=20.0, records=records, groundtruth=gt
+    )
     copy = open_dataset("synthetic", write_sequence(seq, tmp_path / "copy", layout="synthetic"))
     assert_same(copy, seq)
     assert [r.timestamp_ns for r in copy.records] == [r.timestamp_ns for r in records]
@@ -399,7 +407,16 @@ def test_round_trip_of_a_foreign_sequence(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize(
     ("option", "value"),
-    [("scene", "mars"), ("frames", 0), ("frames", -3), ("frames", 2.5), ("frames", "many"), ("seed", -1), ("seed", True), ("sensor", "lidar")],
+    [
+        ("scene", "mars"),
+        ("frames", 0),
+        ("frames", -3),
+        ("frames", 2.5),
+        ("frames", "many"),
+        ("seed", -1),
+        ("seed", True),
+        ("sensor", "lidar"),
+    ],
 )
 def test_bad_option_values_name_the_option(option: str, value: object) -> None:
     with pytest.raises(DatasetError) as error:

@@ -36,16 +36,31 @@ def test_an_unknown_metric_names_the_closest_or_lists_the_known_ones() -> None:
         metrics.tracking_rte
     with pytest.raises(KeyError, match=r"trial metrics have no 'atermse'; did you mean 'ate_rmse'\?"):
         metrics["atermse"]
-    with pytest.raises(AttributeError, match=r"trial metrics have no 'xyz'; metrics: ate_rmse, rpe_trans, rpe_rot, t_rel, r_rel, tracking_rate, .*, failures$"):
+    with pytest.raises(
+        AttributeError,
+        match=r"trial metrics have no 'xyz'; metrics: ate_rmse, rpe_trans, rpe_rot, t_rel, r_rel, tracking_rate, .*, failures$",
+    ):
         metrics.xyz
     assert metrics.get("xyz") is None and not hasattr(metrics, "xyz") and not hasattr(metrics, "_private")
 
 
 def test_equal_to_the_dict_json_and_history_unchanged() -> None:
     metrics = trial().metrics
-    assert metrics == STORED and STORED == metrics and metrics != {**STORED, "maps": 2}
+    assert metrics == STORED and metrics == STORED and metrics != {**STORED, "maps": 2}
     assert json.loads(json.dumps(metrics)) == STORED
-    outcome = Outcome("t.py::test_x[fog.visibility_m=30]", "fake", "urban", "fog.visibility_m", "lower", None, "r", "passed", Boundary(30.0, None, "m"), "single", [trial()])
+    outcome = Outcome(
+        "t.py::test_x[fog.visibility_m=30]",
+        "fake",
+        "urban",
+        "fog.visibility_m",
+        "lower",
+        None,
+        "r",
+        "passed",
+        Boundary(30.0, None, "m"),
+        "single",
+        [trial()],
+    )
     data = outcome.to_dict()
     assert type(data["trials"][0]["metrics"]) is dict and data["trials"][0]["metrics"] == STORED
     again = Outcome.from_dict(json.loads(json.dumps(data)))
@@ -54,7 +69,13 @@ def test_equal_to_the_dict_json_and_history_unchanged() -> None:
 
 def test_read_only_with_copies_that_keep_the_type() -> None:
     metrics = trial().metrics
-    for change in (lambda m: m.__setitem__("maps", 2), lambda m: m.update(maps=2), lambda m: m.pop("maps"), lambda m: m.setdefault("x", 1), lambda m: m.clear()):
+    for change in (
+        lambda m: m.__setitem__("maps", 2),
+        lambda m: m.update(maps=2),
+        lambda m: m.pop("maps"),
+        lambda m: m.setdefault("x", 1),
+        lambda m: m.clear(),
+    ):
         with pytest.raises(TypeError, match="read-only"):
             change(metrics)
     assert metrics == STORED

@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 
 from pytest_sal import tracking_rate
-from pytest_sal.store.trial_cache import ContentCache
 from pytest_sal.engine.requirements import Requirement
-from pytest_sal.testing import FakeSlam, applied_value
 from pytest_sal.engine.trial_runner import TrialRunner, aggregate_metrics, cached_sequence
+from pytest_sal.store.trial_cache import ContentCache
+from pytest_sal.testing import FakeSlam, applied_value
 from sal_adapters import open_dataset
 from sal_modules import create, fog, perturb
 
@@ -24,7 +24,11 @@ def runner(tmp_path: Path, system: FakeSlam, **options) -> TrialRunner:
 
 
 def test_median_over_runs_and_a_metric_missing_in_most_runs_is_missing() -> None:
-    runs = [{"ate_rmse": 1.0, "tracking_rate": 0.5}, {"ate_rmse": 3.0, "tracking_rate": None}, {"ate_rmse": 2.0, "tracking_rate": None, "failure": "killed by SIGSEGV"}]
+    runs = [
+        {"ate_rmse": 1.0, "tracking_rate": 0.5},
+        {"ate_rmse": 3.0, "tracking_rate": None},
+        {"ate_rmse": 2.0, "tracking_rate": None, "failure": "killed by SIGSEGV"},
+    ]
     metrics = aggregate_metrics(runs)
     assert metrics["ate_rmse"] == 2.0 and metrics["tracking_rate"] is None
     assert metrics["failures"] == ["killed by SIGSEGV"]
@@ -112,13 +116,15 @@ def test_an_edge_that_leaves_the_dataset_unchanged_is_refused_before_any_run(tmp
     # fog at 100 km in a room (depths under 10 m): 255 x (1 - exp(-3.912 x 10 / 1e5)) = 0.1 grey levels
     import pytest
 
-    from pytest_sal.engine.requirements import InvalidRequirement
     from pytest_sal.engine.requirement_runner import SearchSettings, search_outcome
+    from pytest_sal.engine.requirements import InvalidRequirement
 
     calls = tmp_path / "calls.jsonl"
     room = runner(tmp_path, FakeSlam(calls_file=str(calls)))
     requirement = Requirement.build([tracking_rate >= 0.5, fog.visibility_m >= 100_000])
-    with pytest.raises(InvalidRequirement, match=r"fog.visibility_m >= 100000 m: the envelope's edge leaves the frames of .* unchanged \(frames 0, 4, 7"):
+    with pytest.raises(
+        InvalidRequirement, match=r"fog.visibility_m >= 100000 m: the envelope's edge leaves the frames of .* unchanged \(frames 0, 4, 7"
+    ):
         search_outcome(room, requirement, SearchSettings(), "test_room")
     assert not calls.exists()
     assert room.unchanged_frames(25.0) is None  # 25 m fog does change the room

@@ -277,7 +277,10 @@ def test_write_any_sequence_and_reopen(tmp_path: Path) -> None:
 
 def test_grey_sequence_round_trip(tmp_path: Path) -> None:
     grey = np.random.default_rng(5).integers(0, 256, (3, 10, 14), dtype=np.uint8)
-    records = [FrameRecord(index=k, timestamp=0.1 * k, stem=f"{k:06d}", image=lambda k=k: np.repeat(grey[k][..., None], 3, axis=2)) for k in range(3)]
+    records = [
+        FrameRecord(index=k, timestamp=0.1 * k, stem=f"{k:06d}", image=lambda k=k: np.repeat(grey[k][..., None], 3, axis=2))
+        for k in range(3)
+    ]
     camera = Camera(fx=14.0, fy=14.0, cx=6.5, cy=4.5, width=14, height=10)
     seq = Sequence(kind="kitti", name="kitti/xx", camera=camera, sensor="mono", fps=10.0, records=records, grayscale=True)
     path = write_sequence(seq, tmp_path / "grey", layout="tum")

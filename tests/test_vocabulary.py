@@ -265,7 +265,9 @@ def test_ensure_vocabulary_builds_once_even_when_called_concurrently(tmp_path: P
 
     monkeypatch.setattr(vocab_module, "build_vocabulary", counting_build)
     found: list[Path] = []
-    threads = [threading.Thread(target=lambda: found.append(ensure_vocabulary(cache_dir=tmp_path, k=4, levels=3, frames=1))) for _ in range(3)]
+    threads = [
+        threading.Thread(target=lambda: found.append(ensure_vocabulary(cache_dir=tmp_path, k=4, levels=3, frames=1))) for _ in range(3)
+    ]
     for thread in threads:
         thread.start()
     for thread in threads:
@@ -305,7 +307,22 @@ def test_default_vocabulary(orb_vocabulary: Path):
 def test_cli_builds_a_vocabulary(tmp_path: Path, capsys: pytest.CaptureFixture[str], shared_data: Path):
     out = tmp_path / "voc.txt"
     kitti = shared_data / "kitti" / "sequences" / "07"
-    argv = ["vocab", "build", "--from", "synthetic", "--from", f"kitti:{kitti}", "--frames", "2", "--k", "5", "--levels", "3", "-o", str(out)]
+    argv = [
+        "vocab",
+        "build",
+        "--from",
+        "synthetic",
+        "--from",
+        f"kitti:{kitti}",
+        "--frames",
+        "2",
+        "--k",
+        "5",
+        "--levels",
+        "3",
+        "-o",
+        str(out),
+    ]
     assert main(argv) == 0
     printed = capsys.readouterr().out
     for key in ("descriptors  6000 from 6 images", "nodes", "words", "time", "file"):

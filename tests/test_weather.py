@@ -5,7 +5,7 @@ urban world and on the real KITTI 07 and EuRoC V1_01 excerpts."""
 from __future__ import annotations
 
 import warnings
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -30,7 +30,7 @@ KOSCHMIEDER = 3.912
 _trapezoid = getattr(np, "trapezoid", None) or np.trapz
 
 
-@lru_cache(maxsize=None)
+@cache
 def urban(frames: int = 3) -> Sequence:
     return open_dataset("synthetic", scene="urban", frames=frames, sensor="stereo")
 
@@ -144,11 +144,16 @@ def test_heterogeneous_fog_with_zero_heterogeneity_is_the_homogeneous_fog() -> N
     np.testing.assert_array_equal(plain, zero)
     patchy = ready(Fog(visibility_m=50.0, heterogeneity=0.8, noise_scale_m=5.0), seq)
     assert np.abs(patchy.apply(frame.image, depth, frame.index, "left").astype(int) - plain).mean() > 1.0
-    ratio = patchy.optical_depth(depth, frame.index, "left")[depth > 0] / ready(Fog(visibility_m=50.0), seq).optical_depth(depth, frame.index, "left")[depth > 0]
+    ratio = (
+        patchy.optical_depth(depth, frame.index, "left")[depth > 0]
+        / ready(Fog(visibility_m=50.0), seq).optical_depth(depth, frame.index, "left")[depth > 0]
+    )
     assert 0.85 < ratio.mean() < 1.2 and ratio.std() > 0.05  # patches around the same mean density
 
 
-def _reference_optical_depth(fog: Fog, pose: np.ndarray, sequence: Sequence, depth: np.ndarray, us: np.ndarray, vs: np.ndarray) -> np.ndarray:
+def _reference_optical_depth(
+    fog: Fog, pose: np.ndarray, sequence: Sequence, depth: np.ndarray, us: np.ndarray, vs: np.ndarray
+) -> np.ndarray:
     """beta * integral of the density along each pixel's ray in world coordinates (dense trapezoid)."""
     cam = sequence.camera
     rays = np.stack([(us - cam.cx) / cam.fx, (vs - cam.cy) / cam.fy, np.ones(len(us))], axis=1)
@@ -310,7 +315,10 @@ def test_sub_pixel_drops_cover_less_and_snow_streaks_are_short() -> None:
     width = 1e-3 * seq.camera.fx / 6.0
     assert width < 0.2 and far.sum() == pytest.approx(np.pi / 4 * width**2, rel=0.1) and far.max() < 0.01
     snow = ready(Snow(aperture_mm=0.0, exposure_ms=20.0), seq)
-    flake, drop = snow.coverage(one_particle(2.0, 1.0), sky, "left"), ready(Rain(aperture_mm=0.0, exposure_ms=20.0), seq).coverage(one_particle(2.0, 3.0), sky, "left")
+    flake, drop = (
+        snow.coverage(one_particle(2.0, 1.0), sky, "left"),
+        ready(Rain(aperture_mm=0.0, exposure_ms=20.0), seq).coverage(one_particle(2.0, 3.0), sky, "left"),
+    )
     assert streak_extent(flake)[0] < 0.25 * streak_extent(drop)[0]
     big = ready(Snow(aperture_mm=0.0), seq).coverage(one_particle(2.0, 2.0), sky, "left")
     assert big.max() > 0.5  # a 7 mm flake at 2 m in 5 ms: a nearly opaque soft dot
@@ -428,7 +436,9 @@ def euroc(shared_data: Path) -> Sequence:
         return open_dataset("euroc", shared_data / "euroc" / "V1_01_easy_micro", stereo=True, start=40, max_frames=1)
 
 
-@pytest.mark.parametrize(("name", "params"), [("fog", {"visibility_m": 40.0}), ("rain", {"intensity_mm_h": 100.0}), ("snow", {"intensity_mm_h": 3.0})])
+@pytest.mark.parametrize(
+    ("name", "params"), [("fog", {"visibility_m": 40.0}), ("rain", {"intensity_mm_h": 100.0}), ("snow", {"intensity_mm_h": 3.0})]
+)
 def test_weather_on_real_kitti_frames(kitti: Sequence, name: str, params) -> None:
     out = perturb(kitti, create(name, **params), seed=1, depth=FlatWorldDepth())
     clean = kitti[1].image

@@ -20,7 +20,7 @@ import sys
 from collections import defaultdict
 from pathlib import Path
 
-__all__ = ["LAYERS", "Import", "collect_imports", "layer_of", "find_cycles", "main"]
+__all__ = ["LAYERS", "Import", "collect_imports", "find_cycles", "layer_of", "main"]
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("sal_adapters", "sal_modules", "sal_wrappers", "pytest_sal")
@@ -86,7 +86,9 @@ def collect_imports(modules: dict[str, Path]) -> list[Import]:
     return found
 
 
-def _visit(node: ast.AST, source: str, package: str, modules: dict[str, Path], found: list[Import], in_function: bool, type_checking: bool) -> None:
+def _visit(
+    node: ast.AST, source: str, package: str, modules: dict[str, Path], found: list[Import], in_function: bool, type_checking: bool
+) -> None:
     for child in ast.iter_child_nodes(node):
         if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)):
             _visit(child, source, package, modules, found, True, type_checking)

@@ -215,7 +215,12 @@ def track_features(sequence: Sequence | Iterable[np.ndarray], extractor: Feature
 
 
 def compare_features(
-    sequences: dict[str, Sequence], extractors: list[FeatureExtractor], out_dir: str | Path, max_frames: int | None = None, *, progress: bool = False
+    sequences: dict[str, Sequence],
+    extractors: list[FeatureExtractor],
+    out_dir: str | Path,
+    max_frames: int | None = None,
+    *,
+    progress: bool = False,
 ) -> dict[str, dict[str, Any]]:
     """Track every feature type through every sequence (``progress``: a bar per sequence) and
     write, per feature type, ``out_dir/<feature>/summary.json`` (per sequence:
@@ -246,7 +251,9 @@ def compare_features(
             "stats": stats,
             "summary": summary_path,
             "track_survival": save_png(survival_figure(stats, title=f"Track survival ({extractor.name})"), folder / "track_survival.png"),
-            "detections": save_png(detections_figure(stats, title=f"Detections and matches per frame ({extractor.name})"), folder / "detections.png"),
+            "detections": save_png(
+                detections_figure(stats, title=f"Detections and matches per frame ({extractor.name})"), folder / "detections.png"
+            ),
         }
     return results
 
@@ -264,7 +271,14 @@ def survival_figure(stats: dict[str, TrackingStats], *, title: str = "Track surv
             ax.plot([], [], label=f"{name}: no tracks")
             continue
         t = np.arange(1, len(curve) + 2)
-        ax.step(t, np.append(curve, 0.0) * 100.0, where="post", linewidth=1.6, linestyle=LINESTYLES[k % len(LINESTYLES)], label=f"{name}: {len(s.track_lengths)} tracks, mean {s.mean_track_length:.2f} frames")
+        ax.step(
+            t,
+            np.append(curve, 0.0) * 100.0,
+            where="post",
+            linewidth=1.6,
+            linestyle=LINESTYLES[k % len(LINESTYLES)],
+            label=f"{name}: {len(s.track_lengths)} tracks, mean {s.mean_track_length:.2f} frames",
+        )
         longest = max(longest, len(curve) + 1)
     if longest > 30:
         ax.set_xscale("log")
@@ -317,4 +331,10 @@ def _summary(values: np.ndarray) -> dict[str, Any]:
         return {"mean": None, "median": None, "min": None, "max": None, "values": []}
     as_int = bool(np.all(values == np.round(values)))
     listed = [int(v) for v in values] if as_int else [round(float(v), 6) for v in values]
-    return {"mean": round(float(values.mean()), 6), "median": float(np.median(values)), "min": listed[int(values.argmin())], "max": listed[int(values.argmax())], "values": listed}
+    return {
+        "mean": round(float(values.mean()), 6),
+        "median": float(np.median(values)),
+        "min": listed[int(values.argmin())],
+        "max": listed[int(values.argmax())],
+        "values": listed,
+    }

@@ -36,8 +36,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pytest_sal.analysis.metrics import Align, AteResult, ate, relative_errors
 from pytest_sal.analysis.kitti_segments import KITTI_SEGMENTS_M, KITTI_STEP, parse_segments, segment_lengths
+from pytest_sal.analysis.metrics import Align, AteResult, ate, relative_errors
 from sal_adapters.errors import SalError
 from sal_adapters.trajectory import Trajectory
 
@@ -53,6 +53,7 @@ __all__ = [
     "segments",
     "trajectory_distances",
 ]
+
 
 @dataclass(frozen=True, eq=False)
 class KittiResult:

@@ -22,8 +22,7 @@ from scipy.spatial.transform import Rotation
 
 from sal_adapters.errors import SalError
 from sal_adapters.trajectory import Trajectory
-from sal_wrappers.base import RunResult
-from sal_wrappers.base import WRITTEN_BEFORE_FAILURE
+from sal_wrappers.base import WRITTEN_BEFORE_FAILURE, RunResult
 
 __all__ = [
     "AGGREGATED",
@@ -37,8 +36,8 @@ __all__ = [
     "associate",
     "ate",
     "default_max_diff",
-    "relative_errors",
     "evaluate",
+    "relative_errors",
     "rpe",
     "scale_error",
 ]
@@ -136,9 +135,7 @@ class RpeResult:
 
 
 # -- association ----------------------------------------------------------------------------
-def associate(
-    estimate: Trajectory, reference: Trajectory, max_diff: float | None = None, fps: float | None = None
-) -> Association:
+def associate(estimate: Trajectory, reference: Trajectory, max_diff: float | None = None, fps: float | None = None) -> Association:
     """Pair poses by nearest timestamp (evo ``sync.associate_trajectories``, nearest time).
 
     Tolerance ``max_diff`` (s), unless given: half a frame period, never below 0.01 s. The
@@ -155,8 +152,7 @@ def associate(
         except sync.SyncException:
             pass
     raise SalError(
-        f"no estimate pose is within {max_diff:g} s of a reference pose: "
-        f"estimate {_span(estimate)}, reference {_span(reference)}"
+        f"no estimate pose is within {max_diff:g} s of a reference pose: estimate {_span(estimate)}, reference {_span(reference)}"
     )
 
 
@@ -189,9 +185,7 @@ def ate(
 
     pair = _associated(estimate, reference, align, max_diff, fps)
     est, ref = pair.estimate.to_evo(), pair.reference.to_evo()
-    result = _evo_call(
-        ape, ref, est, PoseRelation.translation_part, align=align != "none", correct_scale=align == "sim3"
-    )
+    result = _evo_call(ape, ref, est, PoseRelation.translation_part, align=align != "none", correct_scale=align == "sim3")
     errors = np.asarray(result.np_arrays["error_array"], dtype=np.float64)
     stats = ErrorStats.of(errors)
     return AteResult(
@@ -386,7 +380,9 @@ def evaluate(
     scale = absolute.scale if align == "sim3" else None
     mono_scale_error = None
     if result.sensor == "mono":
-        mono_scale_error = abs(1.0 - scale) if scale is not None else scale_error(result.trajectory, groundtruth, max_diff=absolute.max_diff)
+        mono_scale_error = (
+            abs(1.0 - scale) if scale is not None else scale_error(result.trajectory, groundtruth, max_diff=absolute.max_diff)
+        )
     kitti = kitti_from_ate(absolute, groundtruth, segments_m=lengths)
     return RunMetrics(
         **base,
@@ -496,7 +492,9 @@ def _time_pairs(stamps: np.ndarray, delta: float) -> np.ndarray:
     return np.column_stack([ids[:-1], ids[1:]]).astype(int) if len(ids) > 1 else np.zeros((0, 2), dtype=int)
 
 
-def relative_errors(ref_poses: list[np.ndarray] | np.ndarray, est_poses: list[np.ndarray] | np.ndarray, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def relative_errors(
+    ref_poses: list[np.ndarray] | np.ndarray, est_poses: list[np.ndarray] | np.ndarray, ids: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Translation (m) and rotation (deg) of ``E = (Q_i^-1 Q_j)^-1 (P_i^-1 P_j)`` per index pair
     ``(i, j)`` of ``ids`` (``Q`` reference, ``P`` estimate, 4x4 poses). The KITTI devkit's
     ``pose_error`` is ``E^-1``: the same translation norm and rotation angle."""
@@ -507,4 +505,3 @@ def relative_errors(ref_poses: list[np.ndarray] | np.ndarray, est_poses: list[np
     e = np.linalg.inv(q_rel) @ p_rel
     rot = np.degrees(Rotation.from_matrix(e[:, :3, :3]).magnitude())
     return np.linalg.norm(e[:, :3, 3], axis=1), rot
-

@@ -39,7 +39,9 @@ class SuperPointExtractor:
 
     name = "superpoint"
 
-    def __init__(self, model_path: str | Path, max_keypoints: int = 1000, threshold: float = 0.015, nms_px: int = 4, ratio: float | None = 0.9):
+    def __init__(
+        self, model_path: str | Path, max_keypoints: int = 1000, threshold: float = 0.015, nms_px: int = 4, ratio: float | None = 0.9
+    ):
         self.model_path = Path(model_path)
         self.max_keypoints = int(max_keypoints)
         self.threshold = float(threshold)
@@ -60,7 +62,9 @@ class SuperPointExtractor:
         inputs = self._session.get_inputs()
         outputs = self._session.get_outputs()
         if not inputs or len(outputs) < 2:
-            raise SalError(f"{self.model_path}: a SuperPoint model needs one image input and two outputs: {EXPECTED}; it has {len(inputs)} input(s) and {len(outputs)} output(s)")
+            raise SalError(
+                f"{self.model_path}: a SuperPoint model needs one image input and two outputs: {EXPECTED}; it has {len(inputs)} input(s) and {len(outputs)} output(s)"
+            )
         self._input = inputs[0]
         shape = list(self._input.shape)
         self._channels = shape[1] if len(shape) == 4 and isinstance(shape[1], int) else 1
@@ -79,12 +83,16 @@ class SuperPointExtractor:
         h, w = image.shape
         padded = cv2.copyMakeBorder(image, 0, -h % CELL, 0, -w % CELL, cv2.BORDER_REPLICATE)
         if self._fixed_size is not None and padded.shape != self._fixed_size:
-            raise SalError(f"{self.model_path}: the model takes {self._fixed_size[0]}x{self._fixed_size[1]} images, got {h}x{w} (padded to {padded.shape[0]}x{padded.shape[1]})")
+            raise SalError(
+                f"{self.model_path}: the model takes {self._fixed_size[0]}x{self._fixed_size[1]} images, got {h}x{w} (padded to {padded.shape[0]}x{padded.shape[1]})"
+            )
         batch = np.repeat(padded[None, None], self._channels, axis=1)
         try:
             results = self._session.run(None, {self._input.name: batch})
         except Exception as exc:
-            raise SalError(f"{self.model_path}: the SuperPoint model failed on a {padded.shape[0]}x{padded.shape[1]} image ({type(exc).__name__}: {exc})") from exc
+            raise SalError(
+                f"{self.model_path}: the SuperPoint model failed on a {padded.shape[0]}x{padded.shape[1]} image ({type(exc).__name__}: {exc})"
+            ) from exc
         semi, desc = self._pick_outputs(results, padded.shape)
         return decode_superpoint(semi, desc, (h, w), self.threshold, self.nms_px, self.max_keypoints)
 
@@ -109,15 +117,21 @@ class SuperPointExtractor:
         shapes = ", ".join("x".join(map(str, np.shape(r))) for r in results)
         semi_at = [i for i, a in enumerate(arrays) if a.ndim == 4 and a.shape[0] == 1 and a.shape[1] == 65 and a.shape[2:] == cells]
         if not semi_at:
-            raise SalError(f"{self.model_path}: expected {EXPECTED} for a {padded[0]}x{padded[1]} image (so {cells[0]}x{cells[1]} cells); the model returned {shapes}")
+            raise SalError(
+                f"{self.model_path}: expected {EXPECTED} for a {padded[0]}x{padded[1]} image (so {cells[0]}x{cells[1]} cells); the model returned {shapes}"
+            )
         semi = arrays[semi_at[0]]
-        rest = [a for i, a in enumerate(arrays) if i != semi_at[0] and a.ndim == 4 and a.shape[0] == 1 and a.shape[2] >= 1 and a.shape[3] >= 1]
+        rest = [
+            a for i, a in enumerate(arrays) if i != semi_at[0] and a.ndim == 4 and a.shape[0] == 1 and a.shape[2] >= 1 and a.shape[3] >= 1
+        ]
         if not rest:
             raise SalError(f"{self.model_path}: expected {EXPECTED}; found no 1xDxhxw descriptor output among {shapes}")
         return semi[0], rest[0][0]
 
 
-def decode_superpoint(semi: np.ndarray, desc: np.ndarray, size: tuple[int, int], threshold: float = 0.015, nms_px: int = 4, max_keypoints: int = 1000) -> tuple[np.ndarray, np.ndarray]:
+def decode_superpoint(
+    semi: np.ndarray, desc: np.ndarray, size: tuple[int, int], threshold: float = 0.015, nms_px: int = 4, max_keypoints: int = 1000
+) -> tuple[np.ndarray, np.ndarray]:
     """Keypoints (``N x 2`` x, y) and unit descriptors (``N x D``) from the raw outputs
     ``semi`` (``65 x Hc x Wc``) and ``desc`` (``D x Hd x Wd``) of an image of ``size`` (h, w)."""
     semi = np.asarray(semi, dtype=np.float32)
@@ -171,6 +185,11 @@ def _sample_descriptors(desc: np.ndarray, keypoints: np.ndarray, size: tuple[int
     y0 = np.minimum(np.floor(v).astype(np.int64), max(hd - 2, 0))
     x1, y1 = np.minimum(x0 + 1, wd - 1), np.minimum(y0 + 1, hd - 1)
     fx, fy = (u - x0)[None], (v - y0)[None]
-    out = (desc[:, y0, x0] * (1 - fx) * (1 - fy) + desc[:, y0, x1] * fx * (1 - fy) + desc[:, y1, x0] * (1 - fx) * fy + desc[:, y1, x1] * fx * fy).T
+    out = (
+        desc[:, y0, x0] * (1 - fx) * (1 - fy)
+        + desc[:, y0, x1] * fx * (1 - fy)
+        + desc[:, y1, x0] * (1 - fx) * fy
+        + desc[:, y1, x1] * fx * fy
+    ).T
     norm = np.linalg.norm(out, axis=1, keepdims=True)
     return (out / np.maximum(norm, 1e-12)).astype(np.float32)

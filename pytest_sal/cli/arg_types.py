@@ -66,14 +66,25 @@ def parse_key_values(pairs: list[str], what: str = "--option") -> dict[str, Any]
 
 def add_slam_arguments(command: argparse.ArgumentParser, runs_help: str, default_runs: int | None = 1) -> None:
     """``--slam NAME``, ``--slam-option KEY=VALUE`` (repeatable), ``--runs N``, ``--timeout S``."""
-    command.add_argument("--slam", required=True, metavar="NAME", help="registered SLAM system (entry-point group sal.systems), e.g. reference_vo, orbslam3")
     command.add_argument(
-        "--slam-option", action="append", default=[], metavar="KEY=VALUE",
+        "--slam", required=True, metavar="NAME", help="registered SLAM system (entry-point group sal.systems), e.g. reference_vo, orbslam3"
+    )
+    command.add_argument(
+        "--slam-option",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
         help="option of the SLAM system, repeatable (values parsed as JSON when they can be)",
     )
     shown = "1 for a deterministic system, 5 for a noisy one" if default_runs is None else "%(default)s"
     command.add_argument("--runs", type=positive_int, default=default_runs, metavar="N", help=f"{runs_help} (default: {shown})")
-    command.add_argument("--timeout", type=positive_seconds, default=600.0, metavar="S", help="seconds per SLAM run before it is killed (default: %(default)s)")
+    command.add_argument(
+        "--timeout",
+        type=positive_seconds,
+        default=600.0,
+        metavar="S",
+        help="seconds per SLAM run before it is killed (default: %(default)s)",
+    )
 
 
 def add_cache_arguments(command: argparse.ArgumentParser, holds: str, no_cache: str | None = None) -> None:

@@ -128,26 +128,30 @@ def run_boundary(
 ) -> dict[str, Any]:
     """Run the boundary search of the config's ``robustness_boundary`` block with the SLAM
     system ``slam``; write and return ``boundary_summary.json``'s content."""
-    from pytest_sal.store.trial_cache import command_cache
+    from pytest_sal.analysis.kitti_metrics import KITTI_SEGMENTS_M
+    from pytest_sal.engine.requirement_runner import SearchSettings, search_outcome
+    from pytest_sal.engine.requirements import Requirement, ate_rmse, tracking_rate
+    from pytest_sal.engine.trial_runner import TrialRunner
     from pytest_sal.experiment.config import (
         ConfigError,
         build_module,
         build_sequence,
         load_config,
     )
-    from pytest_sal.analysis.kitti_metrics import KITTI_SEGMENTS_M
     from pytest_sal.report.html import metric_plot
-    from pytest_sal.engine.requirements import Requirement, ate_rmse, tracking_rate
-    from pytest_sal.engine.requirement_runner import SearchSettings, search_outcome
-    from pytest_sal.engine.trial_runner import TrialRunner
+    from pytest_sal.store.trial_cache import command_cache
 
     out = out or sys.stdout
     config = load_config(config_path)
     rb = config.robustness_boundary
     if rb is None:
-        raise ConfigError(config.source, "robustness_boundary", "the config has no robustness_boundary block; sal boundary needs one (with enabled: true)")
+        raise ConfigError(
+            config.source, "robustness_boundary", "the config has no robustness_boundary block; sal boundary needs one (with enabled: true)"
+        )
     if not rb.enabled:
-        raise ConfigError(config.source, "robustness_boundary.enabled", "the robustness_boundary block is disabled; set enabled: true to search it")
+        raise ConfigError(
+            config.source, "robustness_boundary.enabled", "the robustness_boundary block is disabled; set enabled: true to search it"
+        )
     system = _create_system(slam, slam_options or {})  # an unknown system fails before any work
     pert = next(p for p in config.perturbations if p.name == rb.target_perturbation)
     module = build_module(pert)
@@ -166,15 +170,30 @@ def run_boundary(
     folder = config.output_dir() / "robustness_boundary" / system.name / rb.name
     cache = command_cache(cache_dir) if use_cache else None
     runner = TrialRunner(
-        clean, ref, system, requirement, runs=runs, seed=config.experiment.seed, cache=cache, workdir=folder / "runs", timeout=timeout,
-        progress=_progress_printer(ref.unit, out), kitti_segments=config.evaluation.kitti_segments_m or KITTI_SEGMENTS_M,
+        clean,
+        ref,
+        system,
+        requirement,
+        runs=runs,
+        seed=config.experiment.seed,
+        cache=cache,
+        workdir=folder / "runs",
+        timeout=timeout,
+        progress=_progress_printer(ref.unit, out),
+        kitti_segments=config.evaluation.kitti_segments_m or KITTI_SEGMENTS_M,
     )
     unit = ref.unit
     unit_text = f" {unit}" if unit else ""
     sweep = linear_sweep_trials(rb.lower_bound, rb.upper_bound, rb.tolerance)
-    print(f"boundary    {rb.name}: {ref.label} in {rb.lower_bound:g} .. {rb.upper_bound:g}{unit_text} (gets worse {worse}), "
-          f"tolerance {rb.tolerance:g}{unit_text}, max_iters {rb.max_iters}", file=out)
-    print(f"system      {system.name} {json.dumps(system.options(), sort_keys=True)}, up to {runner.policy.max_runs} run(s) per trial", file=out)
+    print(
+        f"boundary    {rb.name}: {ref.label} in {rb.lower_bound:g} .. {rb.upper_bound:g}{unit_text} (gets worse {worse}), "
+        f"tolerance {rb.tolerance:g}{unit_text}, max_iters {rb.max_iters}",
+        file=out,
+    )
+    print(
+        f"system      {system.name} {json.dumps(system.options(), sort_keys=True)}, up to {runner.policy.max_runs} run(s) per trial",
+        file=out,
+    )
     print(f"dataset     {config.dataset.type} {clean.name}: {len(clean)} frames, {clean.sensor}", file=out)
     print(f"requirement {requirement}", file=out)
     test_id = f"sal boundary {config.experiment.name}/{rb.name}"
@@ -186,9 +205,12 @@ def run_boundary(
         summary = _summary(outcome, config, rb, ref, pert.type, sweep, plot)
         atomic_write_text(staging / path.name, json.dumps(summary, indent=2) + "\n")
     cached = outcome.cached_trials
-    print(f"boundary    {ref.label} {outcome.boundary.text()} ({outcome.termination}); "
-          f"{len(outcome.trials)} trials, {outcome.runs} runs ({cached} trials cached) vs {sweep} for a linear sweep at {rb.tolerance:g}{unit_text} steps; "
-          f"{outcome.confidence()}", file=out)
+    print(
+        f"boundary    {ref.label} {outcome.boundary.text()} ({outcome.termination}); "
+        f"{len(outcome.trials)} trials, {outcome.runs} runs ({cached} trials cached) vs {sweep} for a linear sweep at {rb.tolerance:g}{unit_text} steps; "
+        f"{outcome.confidence()}",
+        file=out,
+    )
     print(f"wrote {path}\nwrote {plot}", file=out)
     return summary
 
@@ -242,7 +264,12 @@ def _summary(outcome: Outcome, config: Any, rb: Any, ref: Any, module_type: str,
 
 def _run(args: argparse.Namespace) -> int:
     run_boundary(
-        args.config, args.slam, slam_options=parse_key_values(args.slam_option, "--slam-option"), runs=args.runs,
-        timeout=args.timeout, cache_dir=args.cache_dir, use_cache=not args.no_cache,
+        args.config,
+        args.slam,
+        slam_options=parse_key_values(args.slam_option, "--slam-option"),
+        runs=args.runs,
+        timeout=args.timeout,
+        cache_dir=args.cache_dir,
+        use_cache=not args.no_cache,
     )
     return 0

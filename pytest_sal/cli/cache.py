@@ -51,7 +51,10 @@ def add_cache_commands(commands: argparse._SubParsersAction) -> None:
     )
     for action in (info, clear):
         action.add_argument(
-            "--cache-dir", type=Path, default=DEFAULT_CACHE_DIR, metavar="DIR",
+            "--cache-dir",
+            type=Path,
+            default=DEFAULT_CACHE_DIR,
+            metavar="DIR",
             help="the cache folder (default: %(default)s under the current folder)",
         )
     info.set_defaults(run=_run_info)

@@ -15,9 +15,9 @@ from typing import TYPE_CHECKING
 from pytest_sal.history.run_history import DEFAULT_ROOT
 
 if TYPE_CHECKING:
-    from pytest_sal.history.run_history import RunRecord
     from pytest_sal.engine.outcome import Outcome
     from pytest_sal.history.regression import RegressionCheck
+    from pytest_sal.history.run_history import RunRecord
 
 __all__ = ["add_compare_commands", "compare_runs"]
 
@@ -42,15 +42,21 @@ def add_compare_commands(commands: argparse._SubParsersAction) -> None:
     compare = commands.add_parser(
         "compare",
         help="compare a run of the history with a baseline run; exit 1 on a regression",
-        description="One row per test of RUN: the baseline's boundary and verdict, this run's, the change. "
-        "Regressions come first.",
+        description="One row per test of RUN: the baseline's boundary and verdict, this run's, the change. Regressions come first.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     compare.add_argument("ref", metavar="REF", help="the baseline run")
     compare.add_argument("run_ref", nargs="?", default="last", metavar="RUN", help="the run to check (default: last)")
-    compare.add_argument("--fail", dest="checks", action="append", default=[], metavar="CHECK", type=_check,
-                         help="also a regression: " + COMPARE_FAIL_FORMS.replace("%", "%%") + ". Repeatable")  # argparse expands %
+    compare.add_argument(
+        "--fail",
+        dest="checks",
+        action="append",
+        default=[],
+        metavar="CHECK",
+        type=_check,
+        help="also a regression: " + COMPARE_FAIL_FORMS.replace("%", "%%") + ". Repeatable",
+    )  # argparse expands %
     compare.add_argument("--history-dir", type=Path, default=DEFAULT_ROOT, metavar="DIR", help="the run history (default: %(default)s)")
     compare.set_defaults(run=_run_compare)
 
@@ -64,8 +70,8 @@ def _check(text: str) -> RegressionCheck:
 def compare_runs(baseline: RunRecord, run: RunRecord, checks: list[RegressionCheck]) -> list[tuple[Outcome, Outcome | None, list[str]]]:
     """``(outcome, baseline outcome or None, regressions in words)`` for every outcome of
     ``run``, regressions first."""
-    from pytest_sal.history.run_history import outcome_key
     from pytest_sal.history.regression import regressions
+    from pytest_sal.history.run_history import outcome_key
 
     rows = []
     for outcome in run.outcomes:
@@ -78,8 +84,8 @@ def compare_runs(baseline: RunRecord, run: RunRecord, checks: list[RegressionChe
 
 
 def _run_compare(args: argparse.Namespace) -> int:
-    from pytest_sal.history.run_history import History, machine_text
     from pytest_sal.cli.history import change_text, print_table
+    from pytest_sal.history.run_history import History, machine_text
 
     history = History(args.history_dir)
     baseline, run = history.find_runs(args.ref)[-1], history.find_runs(args.run_ref)[-1]
@@ -87,12 +93,24 @@ def _run_compare(args: argparse.Namespace) -> int:
     print(f"{_run_text(run)} against {_run_text(baseline)} in {args.history_dir}")
     machines = machine_text(baseline.machine), machine_text(run.machine)
     if machines[0] != machines[1]:
-        print(f"note: the runs come from different machines ({machines[0]}; {machines[1]}): boundaries that depend on timing may differ for that alone")
+        print(
+            f"note: the runs come from different machines ({machines[0]}; {machines[1]}): boundaries that depend on timing may differ for that alone"
+        )
     table = [("test", "system", "dataset", f"boundary {baseline.label}", f"boundary {run.label}", "change", "verdict")]
     for outcome, before, found in rows:
         verdict = "REGRESSED" if found else outcome.verdict
         change = "not in the baseline" if before is None else change_text(before, outcome)
-        table.append((outcome.test_id, outcome.system, outcome.dataset, before.boundary.text() if before else "-", outcome.boundary.text(), change, verdict))
+        table.append(
+            (
+                outcome.test_id,
+                outcome.system,
+                outcome.dataset,
+                before.boundary.text() if before else "-",
+                outcome.boundary.text(),
+                change,
+                verdict,
+            )
+        )
     print_table(table)
     regressed = [(outcome, found) for outcome, _, found in rows if found]
     for outcome, found in regressed:

@@ -30,7 +30,7 @@ def run_demo(frames: int, seed: int, out_dir: Path) -> list[Path]:
         seq = open_dataset("synthetic", scene=scene, frames=frames, seed=seed, sensor=sensor)
         began = time.perf_counter()
         for frame in tqdm(seq, total=len(seq), desc=f"rendering {scene}", unit="frame", leave=False):
-            frame.image, frame.right, frame.depth  # decode or render (and cache) every part
+            _ = (frame.image, frame.right, frame.depth)  # decode or render (and cache) every part
         seconds = time.perf_counter() - began
         cam = seq.camera
         gt = seq.groundtruth
@@ -38,8 +38,7 @@ def run_demo(frames: int, seed: int, out_dir: Path) -> list[Path]:
         write_image(sheet, contact_sheet(seq))
         written.append(sheet)
         baseline = "" if cam.baseline_m is None else f", baseline {cam.baseline_m:.2f} m"
-        print(f"{seq.name}: {len(seq)} {sensor} frames {cam.width}x{cam.height} px at {seq.fps:g} Hz, "
-              f"fx {cam.fx:.1f} px{baseline}")
+        print(f"{seq.name}: {len(seq)} {sensor} frames {cam.width}x{cam.height} px at {seq.fps:g} Hz, fx {cam.fx:.1f} px{baseline}")
         if gt is not None:
             speed = gt.path_length() / max(seq.timestamps[-1] - seq.timestamps[0], 1e-9)
             print(f"  ground truth: {len(gt)} poses, path {gt.path_length():.2f} m, mean speed {speed:.2f} m/s")

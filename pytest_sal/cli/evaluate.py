@@ -87,7 +87,9 @@ def _run(args: argparse.Namespace) -> int:
     if not args.timeout > 0:
         raise SalError(f"--timeout must be positive, got {args.timeout:g}")
     options = parse_key_values(args.slam_option, "--slam-option")
-    run_evaluate(args.config, args.slam, options, runs=args.runs, timeout=args.timeout, cache_dir=args.cache_dir, use_cache=not args.no_cache)
+    run_evaluate(
+        args.config, args.slam, options, runs=args.runs, timeout=args.timeout, cache_dir=args.cache_dir, use_cache=not args.no_cache
+    )
     return 0
 
 
@@ -104,9 +106,9 @@ def run_evaluate(
 ) -> dict[str, Any]:
     """Run, score and write everything (see the module docstring); return the summary dict
     (also in ``metrics/summary.json``) with ``root`` (the results folder) added."""
-    from pytest_sal.store.trial_cache import command_cache
-    from pytest_sal.experiment.config import build_sequence, load_config, perturbed_sequences
     from pytest_sal.engine.trial_runner import cached_sequence
+    from pytest_sal.experiment.config import build_sequence, load_config, perturbed_sequences
+    from pytest_sal.store.trial_cache import command_cache
     from sal_wrappers import create
 
     config = load_config(config_path)
@@ -142,7 +144,9 @@ def run_evaluate(
                     result.trajectory.write_tum(path)
                 _write_json(metrics_dir / f"run_{k}" / name / "ate.json", _ate_record(metrics, result, k, seconds))
                 if name != BASELINE:
-                    vs = _vs_baseline(metrics, run_metrics[BASELINE], result, baseline_traj=_baseline_trajectory(root, k), groundtruth=groundtruth)
+                    vs = _vs_baseline(
+                        metrics, run_metrics[BASELINE], result, baseline_traj=_baseline_trajectory(root, k), groundtruth=groundtruth
+                    )
                     _write_json(metrics_dir / f"run_{k}" / name / "vs_baseline.json", vs)
                 out(_progress(name, k, runs, metrics, seconds))
             _run_plots(root, k, run_metrics, groundtruth, out)
@@ -167,12 +171,16 @@ def _run_system(system: Any, sequence: Any, workdir: Path, timeout: float | None
         return system.run(sequence, workdir, timeout=timeout)
     except SalError:
         raise
-    except Exception as exc:  # noqa: BLE001 - a broken system must not stop the other runs
+    except Exception as exc:
         n = len(sequence)
         return RunResult(
-            system=getattr(system, "name", type(system).__name__), sequence=sequence.name, sensor=sequence.sensor,
-            timestamps=sequence.timestamps, states=np.full(n, TrackState.NOT_INITIALISED, dtype=np.int8),
-            wall_time_s=time.perf_counter() - start, failure=f"raised {type(exc).__name__}: {exc}",
+            system=getattr(system, "name", type(system).__name__),
+            sequence=sequence.name,
+            sensor=sequence.sensor,
+            timestamps=sequence.timestamps,
+            states=np.full(n, TrackState.NOT_INITIALISED, dtype=np.int8),
+            wall_time_s=time.perf_counter() - start,
+            failure=f"raised {type(exc).__name__}: {exc}",
         )
 
 
@@ -202,7 +210,9 @@ def _ate_record(metrics: Any, result: Any, k: int, seconds: float) -> dict[str, 
     record["ate_stats"] = None if a is None else {k2: getattr(a, k2) for k2 in ("rmse", "mean", "median", "std", "min", "max")}
     record["wall_time_s"] = float(result.wall_time_s)
     record["seconds"] = seconds
-    record["log_tail"] = result.log_tail if result.failure is not None or metrics.failure is not None else ""  # a run or a score that failed
+    record["log_tail"] = (
+        result.log_tail if result.failure is not None or metrics.failure is not None else ""
+    )  # a run or a score that failed
     return record
 
 
@@ -243,26 +253,40 @@ def _vs_baseline(p: Any, b: Any, result: Any, *, baseline_traj: Trajectory | Non
                 same["ate_rmse"] = ate(baseline_traj.select(keep), groundtruth, align=b.align, max_diff=tol).rmse
             except SalError as exc:
                 same["reason"] = f"not scored: {exc}"
-    return _clean({
-        "perturbed_ok": p.failure is None,
-        "baseline_ok": b.failure is None,
-        "perturbed_failure": p.failure,
-        "baseline_failure": b.failure,
-        "ate_rmse": {"baseline": b.ate_rmse, "perturbed": p.ate_rmse, "ratio": ratio(p.ate_rmse, b.ate_rmse), "difference": diff(p.ate_rmse, b.ate_rmse)},
-        "rpe_trans": {"baseline": b.rpe_trans, "perturbed": p.rpe_trans, "ratio": ratio(p.rpe_trans, b.rpe_trans), "difference": diff(p.rpe_trans, b.rpe_trans)},
-        "t_rel": {"baseline": b.t_rel, "perturbed": p.t_rel, "ratio": ratio(p.t_rel, b.t_rel), "difference": diff(p.t_rel, b.t_rel)},
-        "r_rel": {"baseline": b.r_rel, "perturbed": p.r_rel, "ratio": ratio(p.r_rel, b.r_rel), "difference": diff(p.r_rel, b.r_rel)},
-        "tracking_rate": {
-            "baseline": b.tracking_rate, "perturbed": p.tracking_rate,
-            "ratio": ratio(p.tracking_rate, b.tracking_rate), "difference": diff(p.tracking_rate, b.tracking_rate),
-        },
-        "frames": {"baseline": b.frames, "perturbed": p.frames, "tracked_baseline": b.tracked, "tracked_perturbed": p.tracked},
-        "baseline_on_tracked_frames": {
-            **same,
-            "ratio": ratio(p.ate_rmse, same["ate_rmse"]),
-            "difference": diff(p.ate_rmse, same["ate_rmse"]),
-        },
-    })
+    return _clean(
+        {
+            "perturbed_ok": p.failure is None,
+            "baseline_ok": b.failure is None,
+            "perturbed_failure": p.failure,
+            "baseline_failure": b.failure,
+            "ate_rmse": {
+                "baseline": b.ate_rmse,
+                "perturbed": p.ate_rmse,
+                "ratio": ratio(p.ate_rmse, b.ate_rmse),
+                "difference": diff(p.ate_rmse, b.ate_rmse),
+            },
+            "rpe_trans": {
+                "baseline": b.rpe_trans,
+                "perturbed": p.rpe_trans,
+                "ratio": ratio(p.rpe_trans, b.rpe_trans),
+                "difference": diff(p.rpe_trans, b.rpe_trans),
+            },
+            "t_rel": {"baseline": b.t_rel, "perturbed": p.t_rel, "ratio": ratio(p.t_rel, b.t_rel), "difference": diff(p.t_rel, b.t_rel)},
+            "r_rel": {"baseline": b.r_rel, "perturbed": p.r_rel, "ratio": ratio(p.r_rel, b.r_rel), "difference": diff(p.r_rel, b.r_rel)},
+            "tracking_rate": {
+                "baseline": b.tracking_rate,
+                "perturbed": p.tracking_rate,
+                "ratio": ratio(p.tracking_rate, b.tracking_rate),
+                "difference": diff(p.tracking_rate, b.tracking_rate),
+            },
+            "frames": {"baseline": b.frames, "perturbed": p.frames, "tracked_baseline": b.tracked, "tracked_perturbed": p.tracked},
+            "baseline_on_tracked_frames": {
+                **same,
+                "ratio": ratio(p.ate_rmse, same["ate_rmse"]),
+                "difference": diff(p.ate_rmse, same["ate_rmse"]),
+            },
+        }
+    )
 
 
 def _summary(all_metrics: dict[str, list[Any]], slam: str, system: Any, config: Any, clean: Any, runs: int) -> dict[str, Any]:
@@ -283,7 +307,13 @@ def _summary(all_metrics: dict[str, list[Any]], slam: str, system: Any, config: 
             a = np.asarray(values)
             stats: dict[str, Any] = {s: None for s in ("median", "mean", "std", "min", "max")}
             if len(a):
-                stats = {"median": float(np.median(a)), "mean": float(a.mean()), "std": float(a.std()), "min": float(a.min()), "max": float(a.max())}
+                stats = {
+                    "median": float(np.median(a)),
+                    "mean": float(a.mean()),
+                    "std": float(a.std()),
+                    "min": float(a.min()),
+                    "max": float(a.max()),
+                }
             entry[metric] = {**stats, "count": len(values), "values": values}
         entries[name] = entry
     return {
@@ -320,7 +350,7 @@ def _run_plots(root: Path, k: int, run_metrics: dict[str, Any], groundtruth: Tra
 def _try_plot(draw: Callable[[], Any], out: Callable[[str], None]) -> None:
     try:
         draw()
-    except Exception as exc:  # noqa: BLE001 - a plot must not lose the metrics already written
+    except Exception as exc:
         out(f"warning: plot failed: {type(exc).__name__}: {exc}")
 
 
@@ -332,7 +362,7 @@ def _ate_bar_plot(run_metrics: dict[str, Any], path: Path, k: int) -> Path:
     values = [run_metrics[n].ate_rmse for n in names]
     heights = [0.0 if v is None else v for v in values]
     bars = ax.bar(range(len(names)), heights, color=["tab:red" if v is None else "tab:blue" for v in values])
-    for bar, v, n in zip(bars, values, names):
+    for bar, v, _n in zip(bars, values, names):
         label = "failed" if v is None else f"{v:#.3g}"
         ax.annotate(label, (bar.get_x() + bar.get_width() / 2, bar.get_height()), ha="center", va="bottom", fontsize="small")
     b = run_metrics[BASELINE].ate_rmse

@@ -39,11 +39,13 @@ def add_features_commands(commands: argparse._SubParsersAction) -> None:
     cmd.set_defaults(run=_run)
 
 
-def run_features(config_path: Path, features: str, *, model: Path | None = None, max_keypoints: int = 1000, max_frames: int | None = None) -> dict:
+def run_features(
+    config_path: Path, features: str, *, model: Path | None = None, max_keypoints: int = 1000, max_frames: int | None = None
+) -> dict:
     """Validate the config, build the extractors (a missing model is an error before any work),
     then track every feature type through the clean and every perturbed sequence."""
-    from pytest_sal.experiment.config import build_sequence, load_config, perturbed_sequences
     from pytest_sal.analysis.feature_tracking import compare_features, parse_features
+    from pytest_sal.experiment.config import build_sequence, load_config, perturbed_sequences
 
     config = load_config(config_path)
     extractors = parse_features(features, model=model, max_keypoints=max_keypoints)

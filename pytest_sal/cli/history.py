@@ -10,9 +10,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from pytest_sal.cli.arg_types import age_seconds, positive_int
+from pytest_sal.engine.outcome import Outcome
 from pytest_sal.history.gate import NOT_COMPARED
 from pytest_sal.history.run_history import DEFAULT_ROOT, History, OutcomeKey, RunRecord
-from pytest_sal.engine.outcome import Outcome
 from sal_adapters import SalError
 
 if TYPE_CHECKING:
@@ -55,8 +55,11 @@ def add_history_commands(commands: argparse._SubParsersAction) -> None:
     history.add_argument("--system", metavar="S", help="only outcomes of this SLAM system")
     history.add_argument("--dataset", metavar="D", help="only outcomes on this dataset")
     history.add_argument("-o", "--out", type=Path, metavar="PNG", help="plot file (default: sal-history-<test>.png)")
-    prune = history.add_argument_group("sal history prune", "remove old runs: those beyond the newest N, those older than AGE, "
-                                       "or (both given) those that are both; each name's newest run and the newest run stay")
+    prune = history.add_argument_group(
+        "sal history prune",
+        "remove old runs: those beyond the newest N, those older than AGE, "
+        "or (both given) those that are both; each name's newest run and the newest run stay",
+    )
     prune.add_argument("--keep", type=positive_int, metavar="N", help="keep the newest N runs")
     prune.add_argument("--older-than", type=age_seconds, metavar="AGE", help="remove runs written more than AGE ago: 30d, 12h, 2w")
     prune.add_argument("--dry-run", action="store_true", help="list what would be removed, remove nothing")
@@ -83,7 +86,9 @@ def _run_history(args: argparse.Namespace) -> int:
     runs = history.runs()
     if not runs:
         raise SalError(f"no runs saved in {args.history_dir} (give the folder with --history-dir)")
-    keys = [k for k in history.outcome_keys() if (args.system is None or k[1] == args.system) and (args.dataset is None or k[2] == args.dataset)]
+    keys = [
+        k for k in history.outcome_keys() if (args.system is None or k[1] == args.system) and (args.dataset is None or k[2] == args.dataset)
+    ]
     if not keys:
         raise SalError(f"no outcome in {args.history_dir} for {_filter_text(args)}")
     if args.test is None:
@@ -93,7 +98,9 @@ def _run_history(args: argparse.Namespace) -> int:
     series = sorted({k for k in keys if k[0] == test_id})
     if len(series) > 1:
         choices = "; ".join(f"{system} on {dataset}" for _, system, dataset in series)
-        raise SalError(f"{test_id} ran with {len(series)} systems/datasets in the history ({choices}): choose one with --system and --dataset")
+        raise SalError(
+            f"{test_id} ran with {len(series)} systems/datasets in the history ({choices}): choose one with --system and --dataset"
+        )
     _, system, dataset = series[0]
     trend = history.trend(test_id, system, dataset)
     _print_trend(test_id, system, dataset, trend)
@@ -271,4 +278,3 @@ def plot_history(trend: list[tuple[RunRecord, Outcome]], path: str | Path, *, ti
     from pytest_sal.analysis.plots import save_png
 
     return save_png(history_figure(trend, title=title), path)
-

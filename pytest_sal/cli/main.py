@@ -16,10 +16,10 @@ from collections.abc import Sequence as ArgList
 from pathlib import Path
 from typing import Any
 
+from pytest_sal.cli.arg_types import parse_key_values, positive_int
 from pytest_sal.cli.boundary import add_boundary_commands
 from pytest_sal.cli.cache import add_cache_commands
 from pytest_sal.cli.compare import add_compare_commands
-from pytest_sal.cli.arg_types import parse_key_values, positive_int
 from pytest_sal.cli.evaluate import add_evaluate_commands
 from pytest_sal.cli.features import add_features_commands
 from pytest_sal.cli.history import add_history_commands
@@ -29,7 +29,7 @@ from pytest_sal.cli.report import add_report_commands
 from pytest_sal.cli.vocab import add_vocab_commands
 from sal_adapters import DATASETS, SalError, open_dataset
 
-__all__ = ["main", "build_parser"]
+__all__ = ["build_parser", "main"]
 
 EPILOG = """\
 examples:
@@ -73,8 +73,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo = commands.add_parser(
         "demo",
         help="render the synthetic world (urban stereo + indoor RGB-D) and write a preview image",
-        description="Render both synthetic scenes, print what was made and write a contact sheet "
-        "of frames and depth maps.",
+        description="Render both synthetic scenes, print what was made and write a contact sheet of frames and depth maps.",
     )
     demo.add_argument("--frames", type=positive_int, default=20, metavar="N", help="frames per scene (default: %(default)s)")
     demo.add_argument("--seed", type=int, default=0, help="world seed (default: %(default)s)")
@@ -99,7 +98,11 @@ def build_parser() -> argparse.ArgumentParser:
     info.add_argument("--start", type=int, default=0, metavar="N", help="first frame (default: %(default)s)")
     info.add_argument("--max-frames", type=positive_int, metavar="N", help="keep at most N frames")
     info.add_argument(
-        "--option", "-o", action="append", default=[], metavar="KEY=VALUE",
+        "--option",
+        "-o",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
         help="other option of the dataset kind, e.g. -o scene=indoor (values parsed as JSON when they can be)",
     )
     info.add_argument("--json", action="store_true", help="print exactly the keys frames, sensor, fps, camera, groundtruth_poses as JSON")

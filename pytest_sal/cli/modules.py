@@ -59,10 +59,14 @@ def add_module_commands(commands: argparse._SubParsersAction) -> None:
     preview.add_argument("--path", type=Path, metavar="P", help="dataset folder (optional for synthetic)")
     preview.add_argument("--sequence", metavar="S", help="sequence inside the dataset folder (KITTI '07')")
     preview.add_argument("--stereo", action="store_true", help="open the stereo pair (gives stereo depth to depth-aware modules)")
-    preview.add_argument("--dataset-option", action="append", default=[], metavar="KEY=VALUE", help="other dataset option, e.g. scene=indoor")
+    preview.add_argument(
+        "--dataset-option", action="append", default=[], metavar="KEY=VALUE", help="other dataset option, e.g. scene=indoor"
+    )
     preview.add_argument("--frame", type=int, default=0, metavar="I", help="frame position in the dataset (default: %(default)s)")
     preview.add_argument("--seed", type=int, default=0, help="perturbation seed (default: %(default)s)")
-    preview.add_argument("--depth", default="auto", metavar="PROVIDER", help="depth provider: auto, native, stereo or a .onnx model (default: %(default)s)")
+    preview.add_argument(
+        "--depth", default="auto", metavar="PROVIDER", help="depth provider: auto, native, stereo or a .onnx model (default: %(default)s)"
+    )
     preview.add_argument("-o", "--out", type=Path, default=Path("preview.png"), metavar="PNG", help="output image (default: %(default)s)")
     preview.set_defaults(run=_run_preview)
 
@@ -123,7 +127,15 @@ def _run_modules(args: argparse.Namespace) -> int:
         return 0
     for info in described:
         print(f"{info['name']} (v{info['version']}): {info['summary']}")
-        flags = [flag for flag, on in (("needs depth", info["needs_depth"]), ("whole sequence", info["whole_sequence"]), ("drops frames", info["drops_frames"])) if on]
+        flags = [
+            flag
+            for flag, on in (
+                ("needs depth", info["needs_depth"]),
+                ("whole sequence", info["whole_sequence"]),
+                ("drops frames", info["drops_frames"]),
+            )
+            if on
+        ]
         if flags:
             print(f"  [{', '.join(flags)}]")
         for p in info["parameters"]:
@@ -181,6 +193,8 @@ def _run_preview(args: argparse.Namespace) -> int:
     title = f"{clean.name} frame {index}: original | {module!r}"
     write_image(args.out, preview_image(originals, results, title))
     print(f"{module!r}")
-    print(f"frame {index} of {clean.name}: {'kept' if index in kept else 'dropped'}; {elapsed * 1000:.0f} ms (including depth and decoding)")
+    print(
+        f"frame {index} of {clean.name}: {'kept' if index in kept else 'dropped'}; {elapsed * 1000:.0f} ms (including depth and decoding)"
+    )
     print(f"wrote {args.out}")
     return 0

@@ -78,15 +78,17 @@ def run_perturb(config: ExperimentConfig, *, dry_run: bool = False, cache_dir: P
     ``pipeline_results.json`` (or the plan)."""
     import sys
 
-    from pytest_sal.store.trial_cache import command_cache
     from pytest_sal.store.cache_keys import cache_key
+    from pytest_sal.store.trial_cache import command_cache
     from sal_modules.chain import Composite
 
     out = out or sys.stdout
     with no_cache_writes() if dry_run else nullcontext():  # a dry run renders in memory only
         clean = build_sequence(config)
         modules = build_modules(config)
-        perturbed = {name: seq for name, seq in perturbed_sequences(config, clean).items() if name in modules}  # the baseline only if listed
+        perturbed = {
+            name: seq for name, seq in perturbed_sequences(config, clean).items() if name in modules
+        }  # the baseline only if listed
     seed = config.experiment.seed
     root = config.output_dir()
     print(f"experiment  {config.experiment.name} (seed {seed})", file=out)
@@ -103,8 +105,11 @@ def run_perturb(config: ExperimentConfig, *, dry_run: bool = False, cache_dir: P
         state = "enabled" if rb.enabled else "disabled"
         spec = _boundary_param(config, rb)
         unit = f" {spec.search_space().unit}" if spec.search_space().unit else ""
-        print(f"boundary    {rb.name} ({state}): {rb.target_perturbation}.{rb.parameter} in {rb.lower_bound:g} .. {rb.upper_bound:g}{unit}, "
-              f"tolerance {rb.tolerance:g}, max_iters {rb.max_iters}, ate_rmse_fail {rb.ate_rmse_fail:g} m", file=out)
+        print(
+            f"boundary    {rb.name} ({state}): {rb.target_perturbation}.{rb.parameter} in {rb.lower_bound:g} .. {rb.upper_bound:g}{unit}, "
+            f"tolerance {rb.tolerance:g}, max_iters {rb.max_iters}, ate_rmse_fail {rb.ate_rmse_fail:g} m",
+            file=out,
+        )
     if dry_run:
         print("dry run: nothing written", file=out)
         return {"dry_run": True, "output_dir": str(root), "perturbations": list(modules)}
@@ -113,7 +118,9 @@ def run_perturb(config: ExperimentConfig, *, dry_run: bool = False, cache_dir: P
     for name in perturbed:
         target = images / name
         if target.exists() and (not target.is_dir() or (any(target.iterdir()) and not (target / WRITTEN_MARKER).is_file())):
-            raise ConfigError(config.source, "output.base_dir", f"{target} exists and was not written by sal perturb; move it or choose another base_dir")
+            raise ConfigError(
+                config.source, "output.base_dir", f"{target} exists and was not written by sal perturb; move it or choose another base_dir"
+            )
     cache = command_cache(cache_dir)
     results: dict[str, Any] = {
         "experiment": config.experiment.name,
@@ -167,7 +174,10 @@ def run_perturb(config: ExperimentConfig, *, dry_run: bool = False, cache_dir: P
         label = labels[name]
         per_frame = 1000 * r["seconds"] / max(1, r["frames_in"])
         note = " (cached)" if r["cached"] else ""
-        print(f"  {name:{width}s} {label:{lw}s} {r['frames_kept']:>4d}/{r['frames_in']:<4d} {per_frame:9.1f} {r['seconds']:8.2f}{note}", file=out)
+        print(
+            f"  {name:{width}s} {label:{lw}s} {r['frames_kept']:>4d}/{r['frames_in']:<4d} {per_frame:9.1f} {r['seconds']:8.2f}{note}",
+            file=out,
+        )
     print(f"wrote {root}", file=out)
     return results
 

@@ -28,12 +28,13 @@ def add_report_commands(commands: argparse._SubParsersAction) -> None:
     cmd = commands.add_parser(
         "report",
         help="one HTML page from an experiment folder: frames, ATE, boundary, features",
-        description="Build one HTML page from what sal perturb, evaluate, boundary and features wrote\n"
-        "into an experiment folder.",
+        description="Build one HTML page from what sal perturb, evaluate, boundary and features wrote\ninto an experiment folder.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    cmd.add_argument("folder", type=Path, metavar="DIR", help="experiment folder <output.base_dir>/<experiment.name>, or the experiment's YAML config")
+    cmd.add_argument(
+        "folder", type=Path, metavar="DIR", help="experiment folder <output.base_dir>/<experiment.name>, or the experiment's YAML config"
+    )
     cmd.add_argument("-o", "--out", type=Path, metavar="OUT", help="folder for index.html and assets/ (default: DIR/report)")
     cmd.set_defaults(run=_run)
 

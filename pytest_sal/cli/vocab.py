@@ -39,11 +39,18 @@ def add_vocab_commands(commands: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     build.add_argument(
-        "--from", dest="sources", action="append", metavar="KIND[:PATH]",
+        "--from",
+        dest="sources",
+        action="append",
+        metavar="KIND[:PATH]",
         help="training images from a dataset (repeatable; default: synthetic)",
     )
-    build.add_argument("--frames", type=positive_int, default=40, metavar="N", help="images per source, or per synthetic scene (default: %(default)s)")
-    build.add_argument("--seed", type=int, default=0, help="k-means++ seed; synthetic views come from world SEED+100 (default: %(default)s)")
+    build.add_argument(
+        "--frames", type=positive_int, default=40, metavar="N", help="images per source, or per synthetic scene (default: %(default)s)"
+    )
+    build.add_argument(
+        "--seed", type=int, default=0, help="k-means++ seed; synthetic views come from world SEED+100 (default: %(default)s)"
+    )
     build.add_argument("--k", type=int, default=10, help="branching factor, 2..20 (default: %(default)s)")
     build.add_argument("--levels", type=int, default=6, metavar="L", help="tree depth, 1..10; ORB-SLAM3 needs >= 5 (default: %(default)s)")
     build.add_argument("-o", "--out", type=Path, required=True, metavar="FILE", help="vocabulary file to write")
@@ -75,7 +82,9 @@ def _run_build(args: argparse.Namespace) -> int:
 
     check_tree_shape(args.k, args.levels)
     if args.levels < 5:
-        warnings.warn(f"--levels {args.levels}: ORB-SLAM3 loses track with L < 5 (its FeatureVector sits 4 levels above the leaves)")
+        warnings.warn(
+            f"--levels {args.levels}: ORB-SLAM3 loses track with L < 5 (its FeatureVector sits 4 levels above the leaves)", stacklevel=2
+        )
     sources = [parse_source(text) for text in args.sources or ["synthetic"]]
     started = time.perf_counter()
     images: list[np.ndarray] = []

@@ -33,7 +33,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Literal, Protocol
 
-__all__ = ["Judge", "SearchResult", "SearchSpace", "TrialPoint", "boundary_search", "TERMINATIONS"]
+__all__ = ["TERMINATIONS", "Judge", "SearchResult", "SearchSpace", "TrialPoint", "boundary_search"]
 
 #: Why a search stopped.
 TERMINATIONS = ("tolerance", "max_trials", "not_bracketed", "domain_resolution")
@@ -155,9 +155,9 @@ def boundary_search(
             search.run(hint)
 
     passing, failing = search.bracket()
-    if (passing is None or failing is None) and not search.spent and all(t.value != far for t in search.trials):
-        if search.run(far) == edge_passed and judge is not None:  # "never failed/passed" is a claim to confirm
-            search.confirm(search.trials[-1])
+    unbracketed = (passing is None or failing is None) and not search.spent and all(t.value != far for t in search.trials)
+    if unbracketed and search.run(far) == edge_passed and judge is not None:  # "never failed/passed" is a claim to confirm
+        search.confirm(search.trials[-1])
     while True:
         passing, failing = search.bracket()
         if passing is None or failing is None:
@@ -217,7 +217,9 @@ class _Search:
             passing, failing = self.bracket()
             assert passing is not None and failing is not None
             width = abs(passing - failing)
-            if (tolerance is not None and width <= tolerance) or (rel_tolerance is not None and width <= rel_tolerance * max(abs(passing), abs(failing))):
+            if (tolerance is not None and width <= tolerance) or (
+                rel_tolerance is not None and width <= rel_tolerance * max(abs(passing), abs(failing))
+            ):
                 return "tolerance"
             if self.space.neighbours(passing, failing):
                 return "domain_resolution"

@@ -41,7 +41,9 @@ def upgrade_outcome(data: dict[str, Any]) -> dict[str, Any]:
     data["boundary"] = dict(boundary, pass_value=value(boundary.get("pass_value")), fail_value=value(boundary.get("fail_value")), unit=unit)
     if data.get("previous"):
         previous = data["previous"]
-        data["previous"] = dict(previous, pass_value=value(previous.get("pass_value")), fail_value=value(previous.get("fail_value")), unit=unit)
+        data["previous"] = dict(
+            previous, pass_value=value(previous.get("pass_value")), fail_value=value(previous.get("fail_value")), unit=unit
+        )
     data["edge"] = value(data.get("edge"))
     data["trials"] = [dict(t, value=convert(float(t["value"]))) for t in data.get("trials", [])]
     pass_value, edge = data["boundary"]["pass_value"], data["edge"]

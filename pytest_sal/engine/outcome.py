@@ -56,7 +56,9 @@ class TrialMetrics(dict[str, Any]):
         return f"trial metrics have no {name!r}" + suggestion(name, [*TRIAL_METRICS, *self], "metrics")
 
     def _read_only(self, *args: Any, **kwargs: Any) -> NoReturn:
-        raise TypeError("trial metrics are read-only (the medians of the trial's runs); make a changed copy: TrialMetrics({**metrics, name: value})")
+        raise TypeError(
+            "trial metrics are read-only (the medians of the trial's runs); make a changed copy: TrialMetrics({**metrics, name: value})"
+        )
 
     __setitem__ = __delitem__ = clear = pop = popitem = setdefault = update = __ior__ = _read_only  # type: ignore[assignment]
 
@@ -236,7 +238,11 @@ class Outcome:
         if not self.trials or all(len(t.runs) <= 1 for t in self.trials):
             return "1 run per trial"
         parts = [f"edge {self.trials[0].votes()}" if self.termination != "single" else self.trials[0].votes()]
-        ends = [f"{label} {t.votes()}" for label, t in zip(("pass end", "fail end"), self.end_trials()) if t is not None and t is not self.trials[0]]
+        ends = [
+            f"{label} {t.votes()}"
+            for label, t in zip(("pass end", "fail end"), self.end_trials())
+            if t is not None and t is not self.trials[0]
+        ]
         return "; ".join(parts + ([", ".join(ends)] if ends else []))
 
     def to_dict(self) -> dict[str, Any]:

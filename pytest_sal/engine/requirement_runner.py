@@ -6,9 +6,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from pytest_sal.engine.boundary_search import SearchSpace, boundary_search
 from pytest_sal.engine.outcome import Boundary, Outcome, Trial
 from pytest_sal.engine.requirements import InvalidRequirement, Requirement
-from pytest_sal.engine.boundary_search import SearchSpace, boundary_search
 from sal_modules.param_refs import ParamRef
 
 if TYPE_CHECKING:  # the plugin reads SearchSettings at configure time, before any trial runs
@@ -160,7 +160,9 @@ def failure_message(outcome: Outcome) -> str:
         lines.append(f"  at {outcome.parameter} = {first.value:g}{unit}: {_metrics_text(first.metrics, judged)}")
     else:
         lines.append(f"requirement not met: {outcome.requirement}")
-        lines.append(f"  at {outcome.parameter} = {first.value:g}{unit}: {_metrics_text(first.metrics, judged)}; failed: {', '.join(first.failed)}")
+        lines.append(
+            f"  at {outcome.parameter} = {first.value:g}{unit}: {_metrics_text(first.metrics, judged)}; failed: {', '.join(first.failed)}"
+        )
     lines.append(
         f"  boundary: {outcome.parameter} {outcome.boundary.text()} ({len(outcome.trials)} trials, {outcome.runs} runs, "
         f"{outcome.termination}); {outcome.confidence()}"

@@ -24,14 +24,14 @@ from sal_adapters.errors import SalError
 from sal_modules.param_refs import Bound, ParamRef
 
 __all__ = [
+    "METRICS",
     "Criterion",
     "InvalidRequirement",
-    "METRICS",
     "Metric",
     "Requirement",
     "ate_rmse",
-    "rpe_rot",
     "r_rel",
+    "rpe_rot",
     "rpe_trans",
     "scale_error",
     "t_rel",
@@ -165,11 +165,12 @@ class Requirement:
                 raise InvalidRequirement(f"{label} alone is not an envelope: compare it with a number, e.g. {label} >= 25")
             else:
                 raise InvalidRequirement(
-                    f"sal.require() takes metric criteria (ate_rmse < 1.5) and one parameter bound "
-                    f"(fog.visibility_m >= 25); got {item!r}"
+                    f"sal.require() takes metric criteria (ate_rmse < 1.5) and one parameter bound (fog.visibility_m >= 25); got {item!r}"
                 )
         if not criteria:
-            raise InvalidRequirement("sal.require() needs at least one metric criterion, e.g. sal.require(ate_rmse < 1.5, fog.visibility_m >= 25)")
+            raise InvalidRequirement(
+                "sal.require() needs at least one metric criterion, e.g. sal.require(ate_rmse < 1.5, fog.visibility_m >= 25)"
+            )
         if len(envelopes) > 1:
             shown = ", ".join(str(e) for e in envelopes)
             raise InvalidRequirement(
@@ -226,7 +227,9 @@ def _check_search_range(envelope: Bound, search_range: Any) -> None:
     unit = f" {scale.unit}" if scale.unit else ""
     lo, hi = sorted(float(v) for v in search_range)
     if not (math.isfinite(lo) and math.isfinite(hi)) or lo == hi:
-        raise InvalidRequirement(f"sal.require(): search_range {tuple(search_range)!r} must be two finite numbers low < high, in{unit or ' the unit'}")
+        raise InvalidRequirement(
+            f"sal.require(): search_range {tuple(search_range)!r} must be two finite numbers low < high, in{unit or ' the unit'}"
+        )
     if lo < scale.min or hi > scale.max:
         raise InvalidRequirement(
             f"sal.require(): search_range ({lo:g}, {hi:g}){unit} leaves the valid range of {envelope.ref.label}, "
@@ -254,6 +257,10 @@ def _check_options(options: Mapping[str, Any], envelope: Bound | None) -> None:
     if search_range is not None:
         if envelope is None:
             raise InvalidRequirement("sal.require(): search_range needs a parameter bound to search")
-        if not (isinstance(search_range, (tuple, list)) and len(search_range) == 2 and all(isinstance(v, numbers.Real) for v in search_range)):
-            raise InvalidRequirement(f"sal.require(): search_range must be (low, high) in {envelope.ref.unit or 'the unit'}, got {search_range!r}")
+        if not (
+            isinstance(search_range, (tuple, list)) and len(search_range) == 2 and all(isinstance(v, numbers.Real) for v in search_range)
+        ):
+            raise InvalidRequirement(
+                f"sal.require(): search_range must be (low, high) in {envelope.ref.unit or 'the unit'}, got {search_range!r}"
+            )
         _check_search_range(envelope, search_range)

@@ -33,12 +33,12 @@ from typing import Any
 import cv2
 import numpy as np
 
-from pytest_sal.store.trial_cache import ContentCache
-from pytest_sal.store.cache_keys import cache_key
 from pytest_sal.analysis.kitti_metrics import KITTI_SEGMENTS_M
 from pytest_sal.analysis.metrics import evaluate
 from pytest_sal.engine.outcome import TRIAL_METRICS, Trial
 from pytest_sal.engine.requirements import Requirement
+from pytest_sal.store.cache_keys import cache_key
+from pytest_sal.store.trial_cache import ContentCache
 from sal_adapters import Sequence
 from sal_modules import perturb
 from sal_modules.param_refs import ParamRef
@@ -270,7 +270,9 @@ class TrialRunner:
             if self.cache is None:
                 data, cached = self._run(trial.value, key, number), False
             else:
-                data, cached = self.cache.compute(key, lambda: self._run(trial.value, key, number), check=run_record_problem, transient=_not_cached)
+                data, cached = self.cache.compute(
+                    key, lambda key=key, number=number: self._run(trial.value, key, number), check=run_record_problem, transient=_not_cached
+                )
             passed = self.requirement.holds(data["metrics"])
             # a run the machine starved is no evidence that the system failed: it gets no vote
             run = dict(data["metrics"], passed=passed, abstained=bool(data["metrics"].get("starved")) and not passed, cached=cached)
@@ -304,8 +306,12 @@ class TrialRunner:
         except MemoryError:
             states = np.full(len(perturbed), TrackState.NOT_INITIALISED, dtype=np.int8)
             result = RunResult(
-                system=self.system.name, sequence=perturbed.name, sensor=perturbed.sensor, timestamps=perturbed.timestamps,
-                states=states, failure="out of memory (MemoryError)",
+                system=self.system.name,
+                sequence=perturbed.name,
+                sensor=perturbed.sensor,
+                timestamps=perturbed.timestamps,
+                states=states,
+                failure="out of memory (MemoryError)",
             )
         scored = evaluate(result, groundtruth, kitti_segments=self.kitti_segments)
         metrics = scored.to_dict()
@@ -321,7 +327,9 @@ class TrialRunner:
                 from pytest_sal.analysis.plots import plot_trajectories
 
                 title = f"{self.system.name} on {perturbed.name}, {self.ref.label} = {value:g} {self.ref.unit}".rstrip()
-                artifacts["trajectory"] = str(plot_trajectories(groundtruth, {self.system.name: scored.ate.estimate}, folder / f"{key}-trajectory.png", title=title))
+                artifacts["trajectory"] = str(
+                    plot_trajectories(groundtruth, {self.system.name: scored.ate.estimate}, folder / f"{key}-trajectory.png", title=title)
+                )
             if len(perturbed):
                 artifacts["frame"] = str(_example_frame(perturbed, folder / f"{key}.png"))
         record = {"value": value, "module": module.to_dict(), "metrics": metrics, "artifacts": artifacts}
@@ -335,7 +343,9 @@ def cached_sequence(sequence: Sequence, cache: ContentCache, *, progress: bool =
     ``progress`` shows a bar while it is written."""
     from sal_adapters import DATASETS, open_dataset, write_sequence
 
-    folder, _ = cache.compute_dir(cache_key(frames=sequence.fingerprint), lambda target: write_sequence(sequence, target, progress=progress))
+    folder, _ = cache.compute_dir(
+        cache_key(frames=sequence.fingerprint), lambda target: write_sequence(sequence, target, progress=progress)
+    )
     options = {"stereo": True} if sequence.sensor == "stereo" and "stereo" in DATASETS.get(sequence.kind).option_names() else {}
     reopened = open_dataset(sequence.kind, folder, **options)
     return reopened.replace(name=sequence.name, meta=dict(reopened.meta, perturbation=sequence.meta.get("perturbation")))

@@ -25,7 +25,17 @@ from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
-from pytest_sal.experiment.yaml_loader import NAME_CHARS, PATH_CHARS, QUOTE_CHARS, ConfigError, key_text, one_line, quote, read_yaml, type_name
+from pytest_sal.experiment.yaml_loader import (
+    NAME_CHARS,
+    PATH_CHARS,
+    QUOTE_CHARS,
+    ConfigError,
+    key_text,
+    one_line,
+    quote,
+    read_yaml,
+    type_name,
+)
 from sal_adapters.datasets import DATASETS, DatasetKind, open_dataset
 from sal_adapters.errors import SalError
 from sal_adapters.plugins import EntryPointRegistry, PluginError
@@ -166,8 +176,17 @@ _STEP = ("name", "type", "parameters")
 _COMPOSITE = ("mode", "modules")
 _OUTPUT = ("base_dir", "create_timestamp_dir")
 _BOUNDARY = (
-    "enabled", "name", "target_perturbation", "module", "parameter", "lower_bound", "upper_bound",
-    "tolerance", "max_iters", "ate_rmse_fail", "fail_on_tracking_failure",
+    "enabled",
+    "name",
+    "target_perturbation",
+    "module",
+    "parameter",
+    "lower_bound",
+    "upper_bound",
+    "tolerance",
+    "max_iters",
+    "ate_rmse_fail",
+    "fail_on_tracking_failure",
 )
 
 
@@ -295,7 +314,14 @@ class _Parser:
             "dict": isinstance(value, dict),
             "list": isinstance(value, list),
         }[kind]
-        words = {"str": "a string", "bool": "true or false", "int": "an integer", "number": "a number", "dict": "a mapping", "list": "a list"}[kind]
+        words = {
+            "str": "a string",
+            "bool": "true or false",
+            "int": "an integer",
+            "number": "a number",
+            "dict": "a mapping",
+            "list": "a list",
+        }[kind]
         if minimum is not None:
             words += f" >= {minimum:g}"
         if optional:
@@ -355,11 +381,15 @@ class _Parser:
             return
         if not any(fits(value) for _, fits in allowed):
             words = [w for w, _ in allowed]
-            raise self.error(where, f"{quote(value)} is not valid; must be {', '.join(words[:-1]) + ' or ' if len(words) > 1 else ''}{words[-1]}")
+            raise self.error(
+                where, f"{quote(value)} is not valid; must be {', '.join(words[:-1]) + ' or ' if len(words) > 1 else ''}{words[-1]}"
+            )
         if isinstance(value, str) and Path in _alternatives(hint):
             self.checked_path(value, where)
 
-    def registered(self, registry: EntryPointRegistry[T], name: str, where: str, known: tuple[str, ...] = (), hidden: tuple[str, ...] = ()) -> T:
+    def registered(
+        self, registry: EntryPointRegistry[T], name: str, where: str, known: tuple[str, ...] = (), hidden: tuple[str, ...] = ()
+    ) -> T:
         """The entry ``name`` of ``registry``. Only an error lists the names (``known`` first,
         not ``hidden``): listing reads the entry points of every installed package."""
         try:
@@ -368,7 +398,9 @@ class _Parser:
             names = [n for n in registry.names() if n not in hidden]
             if name in names:  # installed, but it cannot be loaded
                 raise self.error(where, one_line(str(exc), 3 * QUOTE_CHARS)) from None
-            raise self.error(where, f"unknown {registry.what} {quote(name, NAME_CHARS)}" + suggestion(name, [*known, *names], "known")) from None
+            raise self.error(
+                where, f"unknown {registry.what} {quote(name, NAME_CHARS)}" + suggestion(name, [*known, *names], "known")
+            ) from None
 
     def safe_name(self, value: Any, where: str) -> str:
         self.typed(value, where, "str")
@@ -417,7 +449,7 @@ class _Parser:
         elif kind != "synthetic":
             raise self.error("dataset.path", f"is required for dataset kind {quote(kind)}")
         sequence = d.get("sequence")
-        if kind == "kitti" and (type(sequence) is int or isinstance(sequence, float) and sequence.is_integer()):
+        if kind == "kitti" and (type(sequence) is int or (isinstance(sequence, float) and sequence.is_integer())):
             sequence = f"{int(sequence):02d}"
         sequence = self.path(sequence, "dataset.sequence", optional=True)  # a folder in the dataset
         stereo = self.typed(d.get("stereo", False), "dataset.stereo", "bool")
@@ -425,16 +457,23 @@ class _Parser:
         for key in options:
             if key not in allowed or key in ("sequence", "stereo"):
                 rest = [a for a in allowed if a not in ("sequence", "stereo")]
-                raise self.error(f"dataset.options.{key_text(key)}", f"unknown option of dataset kind {quote(kind)}" + suggestion(str(key), rest, "known"))
+                raise self.error(
+                    f"dataset.options.{key_text(key)}",
+                    f"unknown option of dataset kind {quote(kind)}" + suggestion(str(key), rest, "known"),
+                )
         hints = _option_hints(dataset_kind)
         for key, value in options.items():
             self.option(value, f"dataset.options.{key}", hints.get(key))
         frames = options.get("frames")
         if _is_number(frames) and not 1 <= frames <= MAX_RENDERED_FRAMES:
-            raise self.error("dataset.options.frames", f"{quote(frames)} is not valid; must be a whole number in 1 .. {MAX_RENDERED_FRAMES}")
+            raise self.error(
+                "dataset.options.frames", f"{quote(frames)} is not valid; must be a whole number in 1 .. {MAX_RENDERED_FRAMES}"
+            )
         for key, given in (("sequence", sequence), ("stereo", stereo or None)):
             if given is not None and key not in allowed:
-                raise self.error(f"dataset.{key}", f"dataset kind {quote(kind)} has no {key} option; its options: {', '.join(allowed) or 'none'}")
+                raise self.error(
+                    f"dataset.{key}", f"dataset kind {quote(kind)} has no {key} option; its options: {', '.join(allowed) or 'none'}"
+                )
         return DatasetConfig(
             type=kind,
             path=folder,
@@ -459,11 +498,16 @@ class _Parser:
             d = self.mapping(item, where, _PERTURBATION, required=("name", "type"))
             name = self.safe_name(d["name"], f"{where}.name")
             if name in seen:
-                raise self.error(f"{where}.name", f"{quote(name)} is already the name of perturbations[{seen[name]}]; names must be unique (they are folder names)")
+                raise self.error(
+                    f"{where}.name",
+                    f"{quote(name)} is already the name of perturbations[{seen[name]}]; names must be unique (they are folder names)",
+                )
             seen[name] = i
             kind = self.typed(d["type"], f"{where}.type", "str")
             if name == BASELINE and kind != "none":
-                raise self.error(f"{where}.name", f"{BASELINE!r} is kept for the clean sequence (type none); rename this {quote(kind)} perturbation")
+                raise self.error(
+                    f"{where}.name", f"{BASELINE!r} is kept for the clean sequence (type none); rename this {quote(kind)} perturbation"
+                )
             enabled = self.typed(d.get("enabled", True), f"{where}.enabled", "bool")
             params = self.typed(d.get("parameters") or {}, f"{where}.parameters", "dict")
             if kind == "none":
@@ -478,7 +522,10 @@ class _Parser:
                 found.append(PerturbationConfig(name, kind, enabled, dict(params)))
             modules += len(found[-1].modules) or 1
             if modules > MAX_PERTURBATIONS:
-                raise self.error(where, f"brings the modules to {modules} (composite steps count one each); the limit is {MAX_PERTURBATIONS} (split the experiment)")
+                raise self.error(
+                    where,
+                    f"brings the modules to {modules} (composite steps count one each); the limit is {MAX_PERTURBATIONS} (split the experiment)",
+                )
         return tuple(found)
 
     def module(self, kind: str, params: dict[str, Any], where: str, known: tuple[str, ...] = ()) -> Perturbation:
@@ -490,7 +537,9 @@ class _Parser:
         specs = cls.parameters()
         for key, value in params.items():
             if key not in specs:
-                raise self.error(f"{where}.parameters.{key_text(key)}", f"{kind} has no such parameter" + suggestion(str(key), specs, "parameters"))
+                raise self.error(
+                    f"{where}.parameters.{key_text(key)}", f"{kind} has no such parameter" + suggestion(str(key), specs, "parameters")
+                )
             spec = specs[key]
             try:
                 spec.validate(value, kind)
@@ -554,10 +603,15 @@ class _Parser:
         target = self.typed(d["target_perturbation"], f"{w}.target_perturbation", "str")
         by_name = {p.name: p for p in perturbations}
         if target not in by_name:
-            raise self.error(f"{w}.target_perturbation", f"{quote(target)} is not a perturbation of this config" + suggestion(target, by_name, "perturbations"))
+            raise self.error(
+                f"{w}.target_perturbation",
+                f"{quote(target)} is not a perturbation of this config" + suggestion(target, by_name, "perturbations"),
+            )
         pert = by_name[target]
         if pert.type == "none":
-            raise self.error(f"{w}.target_perturbation", f"{quote(target)} is the clean sequence (type none); it has no parameter to search")
+            raise self.error(
+                f"{w}.target_perturbation", f"{quote(target)} is the clean sequence (type none); it has no parameter to search"
+            )
         parameter = self.typed(d["parameter"], f"{w}.parameter", "str")
         from sal_modules.chain import Composite
 
@@ -568,17 +622,30 @@ class _Parser:
                 position, spec = module.param(parameter)
             except ParameterError:
                 addresses = [a for a, (_, p) in module.addresses().items() if p.searchable and "@" not in a and "." in a]
-                raise self.error(f"{w}.parameter", f"composite {quote(target)} has no parameter {quote(parameter)}" + suggestion(parameter, addresses, "searchable")) from None
+                raise self.error(
+                    f"{w}.parameter",
+                    f"composite {quote(target)} has no parameter {quote(parameter)}" + suggestion(parameter, addresses, "searchable"),
+                ) from None
             owner = module.steps[position].name
         else:
             spec = type(module).parameters().get(parameter)  # type: ignore[assignment]
             owner = module.name
-        searchable = [a for a, (_, p) in module.addresses().items() if p.searchable and "@" not in a and "." in a] if isinstance(module, Composite) else list(type(module).searchable())
+        searchable = (
+            [a for a, (_, p) in module.addresses().items() if p.searchable and "@" not in a and "." in a]
+            if isinstance(module, Composite)
+            else list(type(module).searchable())
+        )
         if spec is None or not spec.searchable:
-            raise self.error(f"{w}.parameter", f"{quote(parameter)} is not a searchable parameter of {quote(target)} ({module.name})" + suggestion(parameter, searchable, "searchable"))
+            raise self.error(
+                f"{w}.parameter",
+                f"{quote(parameter)} is not a searchable parameter of {quote(target)} ({module.name})"
+                + suggestion(parameter, searchable, "searchable"),
+            )
         declared = self.typed(d.get("module", ""), f"{w}.module", "str")
         if declared and declared != owner:
-            raise self.error(f"{w}.module", f"{quote(declared)} does not match the module of {quote(parameter)} in {quote(target)}, which is {owner!r}")
+            raise self.error(
+                f"{w}.module", f"{quote(declared)} does not match the module of {quote(parameter)} in {quote(target)}, which is {owner!r}"
+            )
         scale = spec.search_space()
         unit = f" {scale.unit}" if scale.unit else ""
         allowed = f"{'an integer' if scale.domain == 'integer' else 'a number'} in {scale.min:g} .. {scale.max:g}{unit}"
@@ -587,7 +654,9 @@ class _Parser:
             v = d[key]
             ok = _is_number(v) and scale.min <= v <= scale.max and (scale.domain != "integer" or float(v).is_integer())
             if not ok:
-                raise self.error(f"{w}.{key}", f"{quote(v)}{unit if _is_number(v) else ''} is not valid; {parameter} search values must be {allowed}")
+                raise self.error(
+                    f"{w}.{key}", f"{quote(v)}{unit if _is_number(v) else ''} is not valid; {parameter} search values must be {allowed}"
+                )
             bounds[key] = int(v) if scale.domain == "integer" else float(v)
         if not bounds["lower_bound"] < bounds["upper_bound"]:
             raise self.error(f"{w}.upper_bound", f"{bounds['upper_bound']:g} must be greater than lower_bound {bounds['lower_bound']:g}")

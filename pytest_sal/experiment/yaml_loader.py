@@ -82,7 +82,9 @@ class _UniqueKeyLoader(yaml.SafeLoader):
             return super().construct_object(node, deep=deep)
         except (ValueError, TypeError, KeyError, AttributeError, OverflowError):
             tag = node.tag.rsplit(":", 1)[-1]
-            raise yaml.constructor.ConstructorError(None, None, f"{quote(node.value)} is not a valid {tag} value", node.start_mark) from None
+            raise yaml.constructor.ConstructorError(
+                None, None, f"{quote(node.value)} is not a valid {tag} value", node.start_mark
+            ) from None
 
 
 def _construct_mapping(loader: yaml.SafeLoader, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
@@ -144,7 +146,7 @@ def quote(value: Any, limit: int = QUOTE_CHARS) -> str:
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
-_KEY = re.compile(r"[A-Za-z0-9_.-]{1,%d}" % NAME_CHARS)
+_KEY = re.compile(rf"[A-Za-z0-9_.-]{{1,{NAME_CHARS}}}")
 
 
 def key_text(key: Any) -> str:
@@ -178,7 +180,9 @@ def read_yaml(text: str, source: str = "<config>") -> Any:
         raise ConfigError(source, "", f"nested deeper than {MAX_DEPTH} levels; a config needs a few") from None
     except yaml.reader.ReaderError as exc:  # str() of it is three lines
         line = text.count("\n", 0, exc.position) + 1
-        raise ConfigError(f"{source}:{line}", "", f"YAML syntax error: character #x{exc.character:04x} is not allowed ({exc.reason})") from None
+        raise ConfigError(
+            f"{source}:{line}", "", f"YAML syntax error: character #x{exc.character:04x} is not allowed ({exc.reason})"
+        ) from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
         line = f":{mark.line + 1}" if mark is not None else ""

@@ -18,9 +18,9 @@ from typing import TYPE_CHECKING
 from sal_adapters.errors import SalError
 
 if TYPE_CHECKING:
-    from pytest_sal.history.run_history import History
     from pytest_sal.engine.outcome import Outcome
     from pytest_sal.history.regression import RegressionCheck
+    from pytest_sal.history.run_history import History
 
 __all__ = ["MISSING_POLICIES", "NOT_COMPARED", "PATH_OPTIONS", "compare_with_baseline", "space_form_problem"]
 
@@ -46,8 +46,8 @@ def compare_with_baseline(
     ``previous`` (the baseline's boundary), ``comparison`` (what it was compared with, or why
     not) and ``regression`` (the failed ``checks``; with ``missing="fail"``, also a missing
     baseline). Returns ``outcome``."""
-    from pytest_sal.history.run_history import outcome_key
     from pytest_sal.history.regression import regressions
+    from pytest_sal.history.run_history import outcome_key
 
     try:
         found = history.baseline(outcome_key(outcome), ref)

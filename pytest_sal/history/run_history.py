@@ -114,6 +114,7 @@ def commit_info(cwd: str | Path | None = None) -> tuple[str, bool]:
     --untracked-files=no``; untracked files, the history itself among them, do not count).
     Without git, outside a repository, or before the first commit: ``("", False)``, no error.
     """
+
     def git(*args: str) -> str | None:
         try:
             done = subprocess.run(["git", *args], cwd=cwd, capture_output=True, text=True, timeout=20, check=False)

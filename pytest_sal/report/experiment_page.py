@@ -26,8 +26,8 @@ from typing import Any
 
 import numpy as np
 
-from pytest_sal.report.html import REPORT_CSS, asset_src, esc, html_page, page_folder
 from pytest_sal.engine.requirements import METRICS
+from pytest_sal.report.html import REPORT_CSS, asset_src, esc, html_page, page_folder
 from sal_adapters import SalError, Sequence, open_dataset
 from sal_adapters.atomic import copy_file
 from sal_adapters.datasets import WRITTEN_MARKER
@@ -140,12 +140,16 @@ def _write_report(folder: Path, out_dir: Path, warn: Callable[[str], None]) -> N
     where = f"{dataset.get('type', '')} {dataset.get('name', '')}, {dataset.get('frames', '?')} frames" if dataset else ""
     problems = "".join(f"<li>{esc(p)}</li>" for p in page.problems)
     title = f"Experiment {name}"
-    text = html_page(title, REPORT_CSS + _EXTRA_CSS, _BODY.format(
-        title=esc(title),
-        where=esc(f"{where} - {folder}" if where else str(folder)),
-        problems=f"<section class='problems'><h2>Left out</h2><ul>{problems}</ul></section>" if problems else "",
-        sections="\n".join(sections),
-    ))
+    text = html_page(
+        title,
+        REPORT_CSS + _EXTRA_CSS,
+        _BODY.format(
+            title=esc(title),
+            where=esc(f"{where} - {folder}" if where else str(folder)),
+            problems=f"<section class='problems'><h2>Left out</h2><ul>{problems}</ul></section>" if problems else "",
+            sections="\n".join(sections),
+        ),
+    )
     atomic_write_text(out_dir / "index.html", text)
 
 
@@ -158,7 +162,9 @@ def _results_folder(config_path: Path) -> Path:
         return config.output_dir()
     runs = sorted(config.output.base_dir.glob(f"{config.experiment.name}_????????_??????"))
     if not runs:
-        raise SalError(f"{config_path}: no results folder {config.output.base_dir / config.experiment.name}_<YYYYmmdd_HHMMSS> yet; run sal perturb or sal evaluate on it first")
+        raise SalError(
+            f"{config_path}: no results folder {config.output.base_dir / config.experiment.name}_<YYYYmmdd_HHMMSS> yet; run sal perturb or sal evaluate on it first"
+        )
     return runs[-1]  # the timestamps sort in time order
 
 
@@ -171,7 +177,9 @@ def _frames_section(page: _Page, pipeline: dict[str, Any] | None) -> str:
     if not images.is_dir():
         return f"<section>{heading}<p class='dim'>no perturbed sequences: run <code>sal perturb CONFIG</code></p></section>"
     recorded = (pipeline or {}).get("perturbations") or {}
-    names = [n for n in recorded if (images / n).is_dir()] + sorted(p.name for p in images.iterdir() if p.is_dir() and p.name not in recorded and not p.name.startswith("."))
+    names = [n for n in recorded if (images / n).is_dir()] + sorted(
+        p.name for p in images.iterdir() if p.is_dir() and p.name not in recorded and not p.name.startswith(".")
+    )
     sequences: dict[str, Sequence] = {}
     clean = _clean_sequence(page)
     if clean is not None:
@@ -264,12 +272,30 @@ def _slam_section(page: _Page) -> str:
             parts.append(f"<p class='dim'>{'unreadable' if path.is_file() else 'missing'}: {esc(page.rel(path))}</p>")
             continue
         parts.append(_slam_table(summary))
-        parts.append(page.picture(system / "metrics" / "aggregated_metrics.png", f"slam/{system.name}/aggregated_metrics.png", f"{system.name}: metrics over runs"))
+        parts.append(
+            page.picture(
+                system / "metrics" / "aggregated_metrics.png",
+                f"slam/{system.name}/aggregated_metrics.png",
+                f"{system.name}: metrics over runs",
+            )
+        )
         for k in range(1, int(summary.get("run_count", 1)) + 1):
-            ate = page.picture(system / "metrics" / "comparison" / f"run_{k}" / "ate_comparison.png", f"slam/{system.name}/run_{k}/ate.png", f"ATE per sequence, run {k}", "half")
+            ate = page.picture(
+                system / "metrics" / "comparison" / f"run_{k}" / "ate_comparison.png",
+                f"slam/{system.name}/run_{k}/ate.png",
+                f"ATE per sequence, run {k}",
+                "half",
+            )
             plots = system / "trajectory_plots" / "comparison" / f"run_{k}"
-            traj = page.picture(plots / "trajectory_comparison_xz.png", f"slam/{system.name}/run_{k}/trajectories.png", f"trajectories, run {k}", "half")
-            error = page.picture(plots / "trajectory_comparison_error.png", f"slam/{system.name}/run_{k}/error.png", f"translation error over time, run {k}", "half")
+            traj = page.picture(
+                plots / "trajectory_comparison_xz.png", f"slam/{system.name}/run_{k}/trajectories.png", f"trajectories, run {k}", "half"
+            )
+            error = page.picture(
+                plots / "trajectory_comparison_error.png",
+                f"slam/{system.name}/run_{k}/error.png",
+                f"translation error over time, run {k}",
+                "half",
+            )
             parts.append(f"<h4>run {k}</h4><div class='pair'>{ate}{traj}{error}</div>")
     return "<section>" + "\n".join(parts) + "</section>"
 
@@ -277,9 +303,11 @@ def _slam_section(page: _Page) -> str:
 def _slam_table(summary: dict[str, Any]) -> str:
     order = summary.get("order") or [CLEAN, *(summary.get("perturbations") or {})]
     units = {key: METRICS[key].unit if key != "tracking_rate" else "" for key, _, _ in SLAM_COLUMNS}
-    head = "<th>sequence</th><th class='num'>runs ok</th>" + "".join(
-        f"<th class='num'>{esc(h)}{f' [{units[key]}]' if units[key] else ''} median</th>" for key, h, _ in SLAM_COLUMNS
-    ) + "<th class='num'>ATE min .. max [m]</th>"
+    head = (
+        "<th>sequence</th><th class='num'>runs ok</th>"
+        + "".join(f"<th class='num'>{esc(h)}{f' [{units[key]}]' if units[key] else ''} median</th>" for key, h, _ in SLAM_COLUMNS)
+        + "<th class='num'>ATE min .. max [m]</th>"
+    )
     rows, failures = [], []
     for name in order:
         entry = summary.get(name) if name == CLEAN else (summary.get("perturbations") or {}).get(name)
@@ -291,12 +319,17 @@ def _slam_table(summary: dict[str, Any]) -> str:
             cells.append(f"<td class='num'>{esc(_stat(entry.get(key), 'median', spec))}</td>")
         ate = entry.get("ate_rmse")
         cells.append(f"<td class='num'>{esc(_stat(ate, 'min', '.4f'))} .. {esc(_stat(ate, 'max', '.4f'))}</td>")
-        failures += [f"{name}, run {r.get('run')}: {r.get('reason')}" if isinstance(r, dict) else f"{name}: {r}" for r in entry.get("failure_reasons") or []]
+        failures += [
+            f"{name}, run {r.get('run')}: {r.get('reason')}" if isinstance(r, dict) else f"{name}: {r}"
+            for r in entry.get("failure_reasons") or []
+        ]
         rows.append(f"<tr class='{'failed' if entry.get('failures') else 'passed'}'>{''.join(cells)}</tr>")
     runs = summary.get("run_count", "?")
     listed = f"<ul class='failures'>{''.join(f'<li>{esc(f)}</li>' for f in failures)}</ul>" if failures else ""
-    return (f"<p class='dim'>{esc(summary.get('sequence', ''))}, {esc(summary.get('frames', '?'))} frames, {esc(runs)} run(s) per sequence</p>"
-            f"<table class='slam'><thead><tr>{head}</tr></thead><tbody>{''.join(rows)}</tbody></table>{listed}")
+    return (
+        f"<p class='dim'>{esc(summary.get('sequence', ''))}, {esc(summary.get('frames', '?'))} frames, {esc(runs)} run(s) per sequence</p>"
+        f"<table class='slam'><thead><tr>{head}</tr></thead><tbody>{''.join(rows)}</tbody></table>{listed}"
+    )
 
 
 # ---------------------------------------------------------------- boundary searches
@@ -314,14 +347,22 @@ def _boundary_section(page: _Page) -> str:
         verdict = "passed" if s.get("edge_verdict") == "passed" else "failed"
         facts = [
             ("requirement", f"<code>{esc(s.get('requirement', '?'))}</code>"),
-            ("boundary", f"{esc(s.get('parameter', '?'))} {esc(s.get('boundary_text', '?'))} <span class='dim'>({esc(s.get('termination', '?'))})</span>"),
+            (
+                "boundary",
+                f"{esc(s.get('parameter', '?'))} {esc(s.get('boundary_text', '?'))} <span class='dim'>({esc(s.get('termination', '?'))})</span>",
+            ),
             ("pass / fail value", f"{esc(_value(s.get('pass_value')))} / {esc(_value(s.get('fail_value')))} {esc(unit)}"),
-            ("trials", f"{esc(s.get('trials_used', len(s.get('trials') or [])))} (a linear sweep at the tolerance step: {esc(s.get('linear_sweep_trials', '?'))})"),
+            (
+                "trials",
+                f"{esc(s.get('trials_used', len(s.get('trials') or [])))} (a linear sweep at the tolerance step: {esc(s.get('linear_sweep_trials', '?'))})",
+            ),
             ("dataset", esc(s.get("dataset", "?"))),
         ]
         parts.append(f"<h3><span class='badge {verdict}'>{verdict}</span> {esc(name)} <span class='dim'>({esc(system)})</span></h3>")
         parts.append("<dl>" + "".join(f"<dt>{esc(k)}</dt><dd>{v}</dd>" for k, v in facts) + "</dl>")
-        parts.append(page.picture(path.parent / "boundary_plot.png", f"boundary/{system}/{name}.png", f"{s.get('parameter')} against the metrics"))
+        parts.append(
+            page.picture(path.parent / "boundary_plot.png", f"boundary/{system}/{name}.png", f"{s.get('parameter')} against the metrics")
+        )
         parts.append(_trials_table(s.get("trials") or [], unit))
     return "<section>" + "\n".join(parts) + "</section>"
 
@@ -332,12 +373,27 @@ def _trials_table(trials: list[Any], unit: str) -> str:
         m = t.get("metrics") or {}
         notes = [x for x, on in (("cached", t.get("cached")), (t.get("votes"), t.get("votes"))) if on]
         failed = "; ".join(t.get("failed") or []) + "".join(f" ({why})" for why in m.get("failures") or [])  # why a metric is missing
-        cells = [str(i + 1), _value(t.get("value")), str(t.get("verdict", "?")), _fmt(m.get("ate_rmse"), ".4f"), _fmt(m.get("tracking_rate"), ".0%"), ", ".join(notes), failed]
+        cells = [
+            str(i + 1),
+            _value(t.get("value")),
+            str(t.get("verdict", "?")),
+            _fmt(m.get("ate_rmse"), ".4f"),
+            _fmt(m.get("tracking_rate"), ".0%"),
+            ", ".join(notes),
+            failed,
+        ]
         numeric = {0, 1, 3, 4}
-        rows.append(f"<tr class='{'passed' if t.get('verdict') == 'pass' else 'failed'}'>"
-                    + "".join(f"<td{' class=num' if j in numeric else ''}>{esc(c)}</td>" for j, c in enumerate(cells)) + "</tr>")
+        rows.append(
+            f"<tr class='{'passed' if t.get('verdict') == 'pass' else 'failed'}'>"
+            + "".join(f"<td{' class=num' if j in numeric else ''}>{esc(c)}</td>" for j, c in enumerate(cells))
+            + "</tr>"
+        )
     head = ["#", f"value [{unit}]" if unit else "value", "verdict", "ATE [m]", "tracked", "", "failed criteria"]
-    return "<table class='trials'><thead><tr>" + "".join(f"<th>{esc(h)}</th>" for h in head) + f"</tr></thead><tbody>{''.join(rows)}</tbody></table>"
+    return (
+        "<table class='trials'><thead><tr>"
+        + "".join(f"<th>{esc(h)}</th>" for h in head)
+        + f"</tr></thead><tbody>{''.join(rows)}</tbody></table>"
+    )
 
 
 # ---------------------------------------------------------------- feature tracking
@@ -352,17 +408,32 @@ def _features_section(page: _Page) -> str:
     for path, s in summaries:
         feature = path.parent.name
         parts.append(f"<h3>{esc(feature)} <span class='dim'>{esc(s.get('extractor', ''))}</span></h3>")
-        head = "".join(f"<th{' class=num' if i else ''}>{h}</th>" for i, h in enumerate(("sequence", "detections / frame", "matches / frame", "match ratio", "mean track length", "longest track")))
+        head = "".join(
+            f"<th{' class=num' if i else ''}>{h}</th>"
+            for i, h in enumerate(
+                ("sequence", "detections / frame", "matches / frame", "match ratio", "mean track length", "longest track")
+            )
+        )
         rows = []
         for name, st in (s.get("sequences") or {}).items():
             if not isinstance(st, dict):
                 continue
-            cells = [name, _stat(st.get("detections_per_frame"), "mean", ".0f"), _stat(st.get("matches_per_frame"), "mean", ".0f"),
-                     _stat(st.get("match_ratio"), "mean", ".1%"), _fmt(st.get("mean_track_length"), ".2f"), _value(st.get("max_track_length"))]
+            cells = [
+                name,
+                _stat(st.get("detections_per_frame"), "mean", ".0f"),
+                _stat(st.get("matches_per_frame"), "mean", ".0f"),
+                _stat(st.get("match_ratio"), "mean", ".1%"),
+                _fmt(st.get("mean_track_length"), ".2f"),
+                _value(st.get("max_track_length")),
+            ]
             rows.append("<tr>" + "".join(f"<td{' class=num' if i else ''}>{esc(c)}</td>" for i, c in enumerate(cells)) + "</tr>")
         parts.append(f"<table class='features'><thead><tr>{head}</tr></thead><tbody>{''.join(rows)}</tbody></table>")
-        survival = page.picture(path.parent / "track_survival.png", f"features/{feature}/track_survival.png", f"{feature}: track survival", "half")
-        detections = page.picture(path.parent / "detections.png", f"features/{feature}/detections.png", f"{feature}: detections and matches per frame", "half")
+        survival = page.picture(
+            path.parent / "track_survival.png", f"features/{feature}/track_survival.png", f"{feature}: track survival", "half"
+        )
+        detections = page.picture(
+            path.parent / "detections.png", f"features/{feature}/detections.png", f"{feature}: detections and matches per frame", "half"
+        )
         parts.append(f"<div class='pair'>{survival}{detections}</div>")
     return "<section>" + "\n".join(parts) + "</section>"
 

@@ -23,25 +23,20 @@ def short_id(test_id: str) -> str:
     return path.rsplit("/", 1)[-1] + sep + rest
 
 
-
 def truncate_left(text: str, width: int) -> str:
     return text if len(text) <= width else ELLIPSIS + text[len(text) - width + 1 :] if width > 1 else text[-width:]
-
 
 
 def truncate_right(text: str, width: int) -> str:
     return text if len(text) <= width else text[: width - 1] + ELLIPSIS if width > 1 else text[:width]
 
 
-
 def num(value: float | None) -> str:
     return "-" if value is None else f"{value:.4g}"
 
 
-
 def with_unit(value: float | None, unit: str) -> str:
     return "-" if value is None else f"{value:.4g}{' ' + unit if unit else ''}"
-
 
 
 def signed(value: float | None, unit: str) -> str:
@@ -50,7 +45,6 @@ def signed(value: float | None, unit: str) -> str:
         return "-"
     text = "±0" if abs(value) < 1e-12 else f"{value:+.3g}"
     return f"{text} {unit}" if unit else text
-
 
 
 def metric_text(name: str, value: Any) -> str:
@@ -63,7 +57,6 @@ def metric_text(name: str, value: Any) -> str:
     return f"{value:.3g}{' ' + unit if unit else ''}"
 
 
-
 def trial_line(trial: Trial, parameter: str, unit: str, metrics: Sequence[str]) -> str:
     """One trial as text: ``fog.visibility_m = 25 m: pass  tracking_rate 0.65, ate_rmse 0.0123 m
     0.4 s (cached)``: the value with its unit, the verdict (``FAIL`` in capitals; the runs'
@@ -74,5 +67,3 @@ def trial_line(trial: Trial, parameter: str, unit: str, metrics: Sequence[str]) 
     value = f"{trial.value:g}{' ' + unit if unit else ''}"
     cached = " (cached)" if trial.cached else ""
     return f"{parameter} = {value}: {'pass' if trial.passed else 'FAIL'}{votes}  {shown}  {trial.wall_time_s:.1f} s{cached}"
-
-

@@ -23,8 +23,9 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.transforms import blended_transform_factory
 
-from pytest_sal.engine.outcome import Outcome, Trial, failures_first
 from pytest_sal.analysis.plots import DPI, FIGSIZE, save_png
+from pytest_sal.engine.outcome import Outcome, Trial, failures_first
+from pytest_sal.engine.requirements import METRICS
 from pytest_sal.report.formatting import metric_text, num, short_id, signed, truncate_left, with_unit
 from pytest_sal.report.outcome_report import (
     boundary_cell,
@@ -37,7 +38,6 @@ from pytest_sal.report.outcome_report import (
     trial_metric_names,
     trial_verdict,
 )
-from pytest_sal.engine.requirements import METRICS
 from sal_adapters.atomic import Replacement, copy_file
 from sal_adapters.textfiles import atomic_write_text
 
@@ -234,14 +234,18 @@ def _write_page(outcomes: list[Outcome], directory: Path, title: str) -> None:
             cells.append(f"<td{_num_cls(align == '>')}>{text}</td>")
         body.append(f"<tr class='{row['status']}'>{''.join(cells)}</tr>")
     where = sorted({" on ".join(x for x in (o.commit, o.machine) if x) for o in outcomes if o.commit or o.machine})
-    page = html_page(title, REPORT_CSS, _BODY.format(
-        title=esc(title),
-        headline=esc(headline(outcomes)),
-        where=f"<p class='where'>{esc(', '.join(where))}</p>" if where else "",
-        head=head,
-        rows="\n".join(body),
-        sections="\n".join(sections),
-    ))
+    page = html_page(
+        title,
+        REPORT_CSS,
+        _BODY.format(
+            title=esc(title),
+            headline=esc(headline(outcomes)),
+            where=f"<p class='where'>{esc(', '.join(where))}</p>" if where else "",
+            head=head,
+            rows="\n".join(body),
+            sections="\n".join(sections),
+        ),
+    )
     atomic_write_text(directory / "index.html", page)
 
 
@@ -273,7 +277,9 @@ def _section(o: Outcome, slug: str, directory: Path) -> str:
     ]
     if o.trials:
         plot = metric_plot(o, assets / "metrics.png")
-        parts.append(f"<img class='plot' src='{asset_src(plot, directory)}' alt='{esc(o.parameter)} against the metrics' width='800' height='600'>")
+        parts.append(
+            f"<img class='plot' src='{asset_src(plot, directory)}' alt='{esc(o.parameter)} against the metrics' width='800' height='600'>"
+        )
         parts.append(_trials_table(o))
     if o.contradictions:
         items = "".join(f"<li>{esc(c)}</li>" for c in o.contradictions)
@@ -318,7 +324,9 @@ def _artifact_figures(o: Outcome, kind: str, assets: Path, directory: Path) -> l
         cls = "passed" if t.passed else "failed"
         src = Path(source)
         if not src.is_file():
-            figures.append(f"<figure class='{cls} missing'><div class='none'>missing: {esc(src.name)}</div><figcaption>{esc(caption)}</figcaption></figure>")
+            figures.append(
+                f"<figure class='{cls} missing'><div class='none'>missing: {esc(src.name)}</div><figcaption>{esc(caption)}</figcaption></figure>"
+            )
             continue
         target = assets / f"{kind}-{index + 1:02d}{src.suffix.lower() or '.png'}"
         copy_file(src, target)

@@ -20,8 +20,8 @@ import re
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
-from pytest_sal.history.gate import NOT_COMPARED
 from pytest_sal.engine.outcome import Boundary, Outcome, Trial, failures_first
+from pytest_sal.history.gate import NOT_COMPARED
 from pytest_sal.report.formatting import metric_text, num, short_id, signed, truncate_left, truncate_right, with_unit
 from sal_adapters.textfiles import atomic_write_text
 
@@ -318,7 +318,14 @@ def _md_details(o: Outcome) -> list[str]:
         names = trial_metric_names(o.criteria)
         header = ["#", f"value [{unit}]" if unit else "value", "verdict", *names, "cached", "failed criteria"]
         rows = [
-            [str(i), num(t.value), trial_verdict(t), *(metric_text(n, t.metrics.get(n)) for n in names), "yes" if t.cached else "", "; ".join(t.failed)]
+            [
+                str(i),
+                num(t.value),
+                trial_verdict(t),
+                *(metric_text(n, t.metrics.get(n)) for n in names),
+                "yes" if t.cached else "",
+                "; ".join(t.failed),
+            ]
             for i, t in enumerate(o.trials, 1)
         ]
         align = ["<", ">", "<", *[">"] * len(names), "<", "<"]

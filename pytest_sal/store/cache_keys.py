@@ -30,7 +30,6 @@ class CacheError(SalError):
         super().__init__(message if self.path is None else f"{self.path}: {message}")
 
 
-
 def canonical_json(value: Any) -> str:
     """The canonical JSON text that :func:`cache_key` hashes.
 

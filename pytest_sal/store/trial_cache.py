@@ -378,9 +378,12 @@ class ContentCache:
             if exc.errno not in _READ_ONLY:
                 raise CacheError(f"cannot create the cache folder: {exc.strerror}", root) from None
             self.read_only = exc.strerror or str(exc)
-            warnings.warn(CacheWarning(
-                f"the cache at {root} is read-only ({self.read_only}): the entries it holds are used, new results are computed and not stored"
-            ), stacklevel=3)
+            warnings.warn(
+                CacheWarning(
+                    f"the cache at {root} is read-only ({self.read_only}): the entries it holds are used, new results are computed and not stored"
+                ),
+                stacklevel=3,
+            )
             return False
         gitignore = root / ".gitignore"
         if fresh and not gitignore.exists():
@@ -582,7 +585,7 @@ def _sha256(text: str) -> str:
 def _pack(data: Mapping[str, Any]) -> bytes:
     """The bytes of an entry holding ``data``: ``{"sha256": <of the canonical JSON>, "data": ...}``."""
     payload = _canonical(data)
-    return f'{{"sha256":"{_sha256(payload)}","data":{payload}}}\n'.encode("utf-8")
+    return f'{{"sha256":"{_sha256(payload)}","data":{payload}}}\n'.encode()
 
 
 def _unpack(raw: bytes) -> tuple[dict[str, Any] | None, str | None]:

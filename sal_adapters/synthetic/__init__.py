@@ -33,7 +33,7 @@ from sal_adapters.synthetic.layout import read_layout, read_metadata, write_layo
 from sal_adapters.synthetic.urban import UrbanWorld
 from sal_adapters.synthetic.world import World
 
-__all__ = ["SYNTHETIC", "SyntheticDataset", "WORLDS", "RENDERER_VERSION", "make_world"]
+__all__ = ["RENDERER_VERSION", "SYNTHETIC", "WORLDS", "SyntheticDataset", "make_world"]
 
 #: Scene name -> world class.
 WORLDS: dict[str, type[World]] = {"urban": UrbanWorld, "indoor": IndoorWorld}

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-__all__ = ["TILE", "LEVELS", "Atlas", "build_atlas"]
+__all__ = ["LEVELS", "TILE", "Atlas", "build_atlas"]
 
 #: Tile edge in level-0 texels.
 TILE = 256

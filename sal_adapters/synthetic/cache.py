@@ -34,7 +34,7 @@ from sal_adapters.synthetic.layout import (
 )
 from sal_adapters.synthetic.world import World
 
-__all__ = ["RENDERER_VERSION", "default_cache_dir", "frame_stem", "FrameStore", "rendered_sequence"]
+__all__ = ["RENDERER_VERSION", "FrameStore", "default_cache_dir", "frame_stem", "rendered_sequence"]
 
 #: Bump whenever rendered pixels or depth change: it is part of the cache folder name and
 #: of every rendered sequence's fingerprint.

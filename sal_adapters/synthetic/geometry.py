@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["FACE_NAMES", "Boxes", "BoxBuilder", "Faces", "visible_faces", "paint_order", "clip_polygon"]
+__all__ = ["FACE_NAMES", "BoxBuilder", "Boxes", "Faces", "clip_polygon", "paint_order", "visible_faces"]
 
 #: Face names by number: ``-x`` is the face at ``lo[0]`` whose outward normal is -x, etc.
 FACE_NAMES = ("-x", "+x", "-y", "+y", "-z", "+z")

@@ -21,7 +21,7 @@ from sal_adapters.synthetic.textures import (
     window,
 )
 
-__all__ = ["WALLS", "POSTERS", "PICTURES", "CRATES", "INDOOR_TILES", "paint_indoor"]
+__all__ = ["CRATES", "INDOOR_TILES", "PICTURES", "POSTERS", "WALLS", "paint_indoor"]
 
 WALLS = 4
 POSTERS = 6

@@ -27,7 +27,20 @@ from sal_adapters.sequence import SENSORS, Frame, FrameRecord, Sequence
 from sal_adapters.textfiles import atomic_write_text, check_times, format_float, read_rows
 from sal_adapters.trajectory import Trajectory
 
-__all__ = ["METADATA", "TIMES", "GROUNDTRUTH", "LEFT", "RIGHT", "DEPTH", "FrameRow", "write_metadata", "read_metadata", "read_times", "write_layout", "read_layout"]
+__all__ = [
+    "DEPTH",
+    "GROUNDTRUTH",
+    "LEFT",
+    "METADATA",
+    "RIGHT",
+    "TIMES",
+    "FrameRow",
+    "read_layout",
+    "read_metadata",
+    "read_times",
+    "write_layout",
+    "write_metadata",
+]
 
 METADATA, TIMES, GROUNDTRUTH = "sequence.json", "times.txt", "groundtruth.txt"
 LEFT, RIGHT, DEPTH = "image_left", "image_right", "depth"

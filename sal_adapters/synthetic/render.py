@@ -33,7 +33,7 @@ from sal_adapters.synthetic.geometry import (
 )
 from sal_adapters.synthetic.textures import SKY_HORIZON, SKY_SLOPE
 
-__all__ = ["Stage", "Renderer"]
+__all__ = ["Renderer", "Stage"]
 
 #: Fixed-point fraction bits of polygon vertices given to ``cv2.fillConvexPoly``.
 SHIFT = 8

@@ -18,19 +18,19 @@ __all__ = [
     "SKY_HORIZON",
     "SKY_SLOPE",
     "Colour",
+    "bricks",
     "canvas",
     "finish",
-    "noise",
     "grain",
-    "speckle",
-    "bricks",
-    "planks",
     "grid_lines",
-    "window",
     "lettering",
-    "write",
-    "vary",
+    "noise",
+    "planks",
     "sky",
+    "speckle",
+    "vary",
+    "window",
+    "write",
 ]
 
 #: Sky tile row of the horizon, and rows per unit of ``tan(depression angle)``: the sky is
@@ -92,7 +92,9 @@ def vary(rng: np.random.Generator, colour: Colour, spread: float) -> tuple[float
     return float(r), float(g), float(b)
 
 
-def bricks(tile: np.ndarray, rng: np.random.Generator, rows: int, columns: int, colour: Colour, mortar: Colour, spread: float = 18.0) -> None:
+def bricks(
+    tile: np.ndarray, rng: np.random.Generator, rows: int, columns: int, colour: Colour, mortar: Colour, spread: float = 18.0
+) -> None:
     """Running-bond brickwork: ``rows`` courses of ``columns`` bricks, half-brick offset
     every other course (``rows`` even keeps it periodic), mortar joints 2 texels."""
     h, w = TILE // rows, TILE // columns
@@ -106,7 +108,9 @@ def bricks(tile: np.ndarray, rng: np.random.Generator, rows: int, columns: int, 
                 cv2.rectangle(tile, (x + 1, row * h + 1), (x + w - 2, row * h + h - 2), brick, -1)
 
 
-def planks(tile: np.ndarray, rng: np.random.Generator, count: int, colour: Colour, spread: float = 20.0, vertical: bool = False, joints: int = 1) -> None:
+def planks(
+    tile: np.ndarray, rng: np.random.Generator, count: int, colour: Colour, spread: float = 20.0, vertical: bool = False, joints: int = 1
+) -> None:
     """``count`` wooden boards with long grain and dark seams (horizontal boards unless
     ``vertical``); each board has its own shade and ``joints`` butt joints with nail holes."""
     size = TILE // count
@@ -135,7 +139,14 @@ def grid_lines(tile: np.ndarray, count: int, colour: Colour, width: int = 2) -> 
         tile[:, k * step : k * step + width] = colour
 
 
-def window(tile: np.ndarray, rng: np.random.Generator, rect: tuple[int, int, int, int], frame: Colour, panes: tuple[int, int] = (2, 2), lit: bool = False) -> None:
+def window(
+    tile: np.ndarray,
+    rng: np.random.Generator,
+    rect: tuple[int, int, int, int],
+    frame: Colour,
+    panes: tuple[int, int] = (2, 2),
+    lit: bool = False,
+) -> None:
     """A framed window ``rect = (x0, y0, x1, y1)``: glass with a sky reflection gradient,
     ``panes`` (columns, rows) separated by mullions, a sill and an inner shadow."""
     x0, y0, x1, y1 = rect
@@ -160,7 +171,9 @@ def window(tile: np.ndarray, rng: np.random.Generator, rect: tuple[int, int, int
     cv2.rectangle(tile, (x0 - 8, y1 + 4), (x1 + 8, y1 + 10), sill, -1)
 
 
-def lettering(tile: np.ndarray, rng: np.random.Generator, origin: tuple[int, int], height: float, colour: Colour, count: int, thickness: int = 2) -> None:
+def lettering(
+    tile: np.ndarray, rng: np.random.Generator, origin: tuple[int, int], height: float, colour: Colour, count: int, thickness: int = 2
+) -> None:
     """``count`` random capital letters and digits starting at ``origin`` (text baseline),
     about ``height`` texels tall."""
     text = "".join(rng.choice(list("ABCDEFGHJKLMNPRSTUVWXYZ0123456789"), count))

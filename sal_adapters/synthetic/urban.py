@@ -131,9 +131,29 @@ class UrbanWorld(World):
             near, far = FACADE + setback, FACADE + setback + 14.0
             top = -KERB - GROUND_FLOOR
             ends = (gable, 64, TILE / GROUND_FLOOR)
-            _side_box(b, side, near, far, top, -KERB, z, z + width, {"street": (shop, TILE / (2 * bay), TILE / GROUND_FLOOR), "-z": ends, "+z": ends})
+            _side_box(
+                b,
+                side,
+                near,
+                far,
+                top,
+                -KERB,
+                z,
+                z + width,
+                {"street": (shop, TILE / (2 * bay), TILE / GROUND_FLOOR), "-z": ends, "+z": ends},
+            )
             ends = (gable, 64, TILE / storey)
-            _side_box(b, side, near, far, top - storeys * storey, top, z, z + width, {"street": (facade, TILE / bay, TILE / storey), "-z": ends, "+z": ends})
+            _side_box(
+                b,
+                side,
+                near,
+                far,
+                top - storeys * storey,
+                top,
+                z,
+                z + width,
+                {"street": (facade, TILE / bay, TILE / storey), "-z": ends, "+z": ends},
+            )
             z += width
 
     def _parked_cars(self, b: BoxBuilder, rng: np.random.Generator, side: int, z0: float, z1: float) -> None:
@@ -149,10 +169,30 @@ class UrbanWorld(World):
                 end, glass, screen = self.tiles["car_end"], self.tiles["cabin_side"], self.tiles["cabin_end"]
                 near, far = ROAD - 1.85, ROAD - 0.05
                 sides, ends = (body, TILE / length, TILE), (end, TILE / 1.8, TILE)
-                _side_box(b, side, near, far, -1.0, 0.0, z, z + length, {"street": sides, "back": sides, "-z": ends, "+z": ends, "-y": (top, TILE / 1.8, TILE / length)})
+                _side_box(
+                    b,
+                    side,
+                    near,
+                    far,
+                    -1.0,
+                    0.0,
+                    z,
+                    z + length,
+                    {"street": sides, "back": sides, "-z": ends, "+z": ends, "-y": (top, TILE / 1.8, TILE / length)},
+                )
                 cabin = length - 2.0
                 sides, ends = (glass, TILE / cabin, TILE / 0.5), (screen, TILE / 1.56, TILE / 0.5)
-                _side_box(b, side, near + 0.12, far - 0.12, -1.5, -1.0, z + 0.9, z + 0.9 + cabin, {"street": sides, "back": sides, "-z": ends, "+z": ends, "-y": (top, TILE / 1.56, TILE / cabin)})
+                _side_box(
+                    b,
+                    side,
+                    near + 0.12,
+                    far - 0.12,
+                    -1.5,
+                    -1.0,
+                    z + 0.9,
+                    z + 0.9 + cabin,
+                    {"street": sides, "back": sides, "-z": ends, "+z": ends, "-y": (top, TILE / 1.56, TILE / cabin)},
+                )
             z += length + rng.uniform(0.8, 4.0)
 
     def _pole(self, b: BoxBuilder, rng: np.random.Generator, side: int, z0: float, z1: float) -> None:
@@ -166,10 +206,30 @@ class UrbanWorld(World):
         if rng.random() < 0.7:
             sign = (self.tiles[f"sign{rng.integers(SIGNS)}"], TILE / 0.65, TILE / 0.65)
             centre = near + 0.075
-            _side_box(b, side, centre - 0.325, centre + 0.325, -3.0, -2.35, z - 0.03, z, {"-z": sign, "+z": metal, "street": metal, "back": metal, "+y": metal})
+            _side_box(
+                b,
+                side,
+                centre - 0.325,
+                centre + 0.325,
+                -3.0,
+                -2.35,
+                z - 0.03,
+                z,
+                {"-z": sign, "+z": metal, "street": metal, "back": metal, "+y": metal},
+            )
 
 
-def _side_box(b: BoxBuilder, side: int, near: float, far: float, y0: float, y1: float, z0: float, z1: float, faces: dict[str, tuple[int, float, float]]) -> None:
+def _side_box(
+    b: BoxBuilder,
+    side: int,
+    near: float,
+    far: float,
+    y0: float,
+    y1: float,
+    z0: float,
+    z1: float,
+    faces: dict[str, tuple[int, float, float]],
+) -> None:
     """Add a box between ``near`` and ``far`` metres from the centre line on ``side`` (-1 left,
     +1 right); face names ``street`` (towards the road) and ``back`` are mapped to x faces."""
     street, back = ("-x", "+x") if side > 0 else ("+x", "-x")

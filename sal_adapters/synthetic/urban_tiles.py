@@ -22,7 +22,7 @@ from sal_adapters.synthetic.textures import (
     write,
 )
 
-__all__ = ["FACADES", "SHOPS", "SIDES", "CAR_COLOURS", "SIGNS", "URBAN_TILES", "paint_urban"]
+__all__ = ["CAR_COLOURS", "FACADES", "SHOPS", "SIDES", "SIGNS", "URBAN_TILES", "paint_urban"]
 
 FACADES = 8
 SHOPS = 6
@@ -49,7 +49,16 @@ URBAN_TILES: tuple[str, ...] = (
     *(f"sign{k}" for k in range(SIGNS)),
 )
 
-WALL_COLOURS = ((150, 70, 55), (205, 190, 160), (160, 160, 155), (215, 190, 120), (230, 228, 215), (120, 90, 70), (175, 120, 90), (140, 150, 160))
+WALL_COLOURS = (
+    (150, 70, 55),
+    (205, 190, 160),
+    (160, 160, 155),
+    (215, 190, 120),
+    (230, 228, 215),
+    (120, 90, 70),
+    (175, 120, 90),
+    (140, 150, 160),
+)
 VIVID = ((200, 40, 40), (30, 110, 190), (30, 140, 70), (230, 170, 30), (120, 50, 140), (20, 20, 20))
 
 

@@ -25,7 +25,7 @@ from sal_adapters.images import read_depth, read_stored, write_depth
 from sal_adapters.sequence import Sequence
 from sal_modules.base import DepthLookup
 
-__all__ = ["DepthProvider", "CachedDepth", "fill_unknown"]
+__all__ = ["CachedDepth", "DepthProvider", "fill_unknown"]
 
 
 class DepthProvider(ABC):
@@ -36,6 +36,7 @@ class DepthProvider(ABC):
     """
 
     name: ClassVar[str] = ""
+
     def caches(self, stream: str) -> bool:
         """Whether computed depth of ``stream`` is stored in the depth cache (worth it when
         computing costs more than reading a ``.npy`` file back)."""

@@ -149,7 +149,9 @@ class MonoDepth(DepthProvider):
             raise ModuleError(f"monocular depth model {self.model} is not a valid ONNX model: {exc}") from exc
         shape = session.get_inputs()[0].shape
         if len(session.get_inputs()) != 1 or len(shape) != 4 or 3 not in (shape[1], shape[3]):
-            raise ModuleError(f"monocular depth model {self.model} must take one 1x3xHxW (or 1xHxWx3) image, its inputs are {[i.shape for i in session.get_inputs()]}")
+            raise ModuleError(
+                f"monocular depth model {self.model} must take one 1x3xHxW (or 1xHxWx3) image, its inputs are {[i.shape for i in session.get_inputs()]}"
+            )
         return session
 
     def compute(self, sequence: Sequence, position: int, stream: str) -> np.ndarray:

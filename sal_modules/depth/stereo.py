@@ -63,7 +63,12 @@ from sal_modules.errors import ModuleError
 __all__ = ["StereoDepth", "StereoRig", "fill_disparity", "fill_unmeasurable", "stereo_rig"]
 
 #: SGBM modes by option name (``3way`` is the fastest, ``hh`` the full 8-path variant).
-MODES = {"sgbm": cv2.StereoSGBM_MODE_SGBM, "3way": cv2.StereoSGBM_MODE_SGBM_3WAY, "hh": cv2.StereoSGBM_MODE_HH, "hh4": cv2.StereoSGBM_MODE_HH4}
+MODES = {
+    "sgbm": cv2.StereoSGBM_MODE_SGBM,
+    "3way": cv2.StereoSGBM_MODE_SGBM_3WAY,
+    "hh": cv2.StereoSGBM_MODE_HH,
+    "hh4": cv2.StereoSGBM_MODE_HH4,
+}
 #: Image area (px) the default block size and speckle window are tuned for (KITTI).
 REFERENCE_AREA = 1241 * 376
 #: Largest rectified image, as a multiple of the raw image area.
@@ -368,16 +373,16 @@ def fill_disparity(disparity: np.ndarray, margin: int, start: np.ndarray | None 
     left, right = _neighbours(valid, axis=1)
     up, down = _neighbours(valid, axis=0)
     v, u = np.nonzero(~valid)
-    l, r = left[v, u], right[v, u]
-    v, u, l, r = v[r < w], u[r < w], l[r < w], r[r < w]
+    lft, r = left[v, u], right[v, u]
+    v, u, lft, r = v[r < w], u[r < w], lft[r < w], r[r < w]
     d_right = disparity[v, r]
     first = 0 if start is None else np.asarray(start)[v]
-    border = (l < 0) & (r - first <= d_right + margin)
-    d_left = np.where(l < 0, d_right, disparity[v, np.maximum(l, 0)])
-    width = r - l - 1
-    occluded = border | ((l >= 0) & (width <= np.abs(d_left - d_right) + margin))
-    enclosed = (l >= 0) & (up[v, u] >= 0) & (down[v, u] < h) & (width <= w // 4) & (down[v, u] - up[v, u] - 1 <= h // 4)
-    value = np.where(occluded, np.minimum(d_left, d_right), d_left + (u - l) / (r - l) * (d_right - d_left))
+    border = (lft < 0) & (r - first <= d_right + margin)
+    d_left = np.where(lft < 0, d_right, disparity[v, np.maximum(lft, 0)])
+    width = r - lft - 1
+    occluded = border | ((lft >= 0) & (width <= np.abs(d_left - d_right) + margin))
+    enclosed = (lft >= 0) & (up[v, u] >= 0) & (down[v, u] < h) & (width <= w // 4) & (down[v, u] - up[v, u] - 1 <= h // 4)
+    value = np.where(occluded, np.minimum(d_left, d_right), d_left + (u - lft) / (r - lft) * (d_right - d_left))
     fill = occluded | enclosed
     out = disparity.astype(np.float32, copy=True)
     out[v[fill], u[fill]] = value[fill]

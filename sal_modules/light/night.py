@@ -48,7 +48,6 @@ import cv2
 import numpy as np
 
 from sal_modules.base import ModuleContext
-from sal_modules.work_buffers import scratch
 from sal_modules.colour import srgb_to_linear
 from sal_modules.errors import ModuleError
 from sal_modules.light.sensor import (
@@ -60,6 +59,7 @@ from sal_modules.light.sensor import (
     white_balance,
 )
 from sal_modules.params import Param
+from sal_modules.work_buffers import scratch
 
 __all__ = ["Exposure", "ImageTranslator", "Night", "auto_exposure"]
 
@@ -98,17 +98,31 @@ class Night(SensorModule):
     summary = "Low light in lux: auto-exposure and gain, Poisson shot + read noise, lamp colour; optional ONNX day-to-night model"
 
     illuminance_lux = Param(
-        5.0, unit="lx", min=0.01, max=150_000.0, searchable=True, worse="lower",
-        scale="log", search_range=(0.01, 100_000.0),
+        5.0,
+        unit="lx",
+        min=0.01,
+        max=150_000.0,
+        searchable=True,
+        worse="lower",
+        scale="log",
+        search_range=(0.01, 100_000.0),
         doc="scene illuminance (street lighting ~5-20 lx, full moon ~0.2 lx); unchanged frames from daylight_lux / max_exposure_factor up",
     )
     daylight_lux = Param(10_000.0, unit="lx", min=1.0, max=150_000.0, doc="illuminance the clean frames were taken at")
     max_exposure_factor = Param(
-        8.0, unit="x", min=1.0, max=10_000.0, doc="longest exposure time the auto-exposure allows, over the daylight exposure",
+        8.0,
+        unit="x",
+        min=1.0,
+        max=10_000.0,
+        doc="longest exposure time the auto-exposure allows, over the daylight exposure",
     )
     max_gain = Param(64.0, unit="x", min=1.0, max=100_000.0, doc="highest analogue gain the auto-exposure allows")
     colour_temperature_k = Param(
-        3000.0, unit="K", min=2000.0, max=15_000.0, doc="colour temperature of the lighting (sodium ~2000 K, warm LED ~3000 K, 6500 K = no shift)",
+        3000.0,
+        unit="K",
+        min=2000.0,
+        max=15_000.0,
+        doc="colour temperature of the lighting (sodium ~2000 K, warm LED ~3000 K, 6500 K = no shift)",
     )
     full_well_e = full_well_param()
     read_noise_e = read_noise_param()

@@ -51,9 +51,9 @@ from functools import lru_cache
 import numpy as np
 
 from sal_modules.base import Perturbation
-from sal_modules.work_buffers import scratch
 from sal_modules.colour import encode_table
 from sal_modules.params import Param
+from sal_modules.work_buffers import scratch
 
 __all__ = [
     "LUMA",

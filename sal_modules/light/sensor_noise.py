@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from sal_modules.work_buffers import scratch
 from sal_modules.colour import srgb_to_linear
 from sal_modules.light.sensor import (
     SensorModule,
@@ -33,6 +32,7 @@ from sal_modules.light.sensor import (
     read_noise_param,
 )
 from sal_modules.params import Param
+from sal_modules.work_buffers import scratch
 
 __all__ = ["SensorNoise"]
 
@@ -45,8 +45,14 @@ class SensorNoise(SensorModule):
     summary = "High-ISO sensor noise: Poisson shot + Gaussian read noise at gain iso/base_iso, brightness kept"
 
     iso = Param(
-        800.0, unit="ISO", min=25.0, max=409_600.0, searchable=True, worse="higher",
-        scale="log", search_range=(100.0, 25_600.0),
+        800.0,
+        unit="ISO",
+        min=25.0,
+        max=409_600.0,
+        searchable=True,
+        worse="higher",
+        scale="log",
+        search_range=(100.0, 25_600.0),
         doc="sensitivity setting",
     )
     base_iso = Param(100.0, unit="ISO", min=25.0, max=409_600.0, doc="ISO of the clean frames (unit gain)")

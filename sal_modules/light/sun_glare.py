@@ -164,16 +164,41 @@ class SunGlare(Perturbation):
     needs_depth = True
 
     sun_illuminance_klux = Param(
-        100.0, unit="klx", min=0.0, max=150.0, searchable=True, worse="higher",
+        100.0,
+        unit="klx",
+        min=0.0,
+        max=150.0,
+        searchable=True,
+        worse="higher",
         doc="illuminance of the sun normal to its rays (direct sun ~100 klx, low sun ~10-50 klx)",
     )
-    sun_azimuth_deg = Param(0.0, unit="deg", min=-180.0, max=180.0, doc="sun direction right of the optical axis (default: straight ahead, over the road)")
+    sun_azimuth_deg = Param(
+        0.0, unit="deg", min=-180.0, max=180.0, doc="sun direction right of the optical axis (default: straight ahead, over the road)"
+    )
     sun_elevation_deg = Param(8.0, unit="deg", min=-90.0, max=90.0, doc="sun direction above the optical axis")
-    daylight_lux = Param(10_000.0, unit="lx", min=1.0, max=150_000.0, doc="illuminance the clean frames were exposed for (white = daylight_lux/pi cd/m^2)")
-    veil_factor = Param(0.3, unit="", min=0.0, max=100.0, doc="lens scatter k in L = 10 k E / theta^2 (1 = the human eye; clean lenses < 1, dirty windscreens > 1)")
-    ghost_reflectance = Param(5e-5, unit="", min=0.0, max=0.05, doc="share of the light the strongest flare ghost returns (coated lens ~5e-5; 0: no ghosts)")
-    sky_depth_m = Param(1000.0, unit="m", min=1.0, max=1e7, doc="z-depth from which a pixel counts as open sky (pixels without depth are sky too); nearer surfaces hide the sun")
-    follow_pose = Param(False, domain="flag", doc="keep the sun fixed in the world with the ground-truth poses (direction given for the first frame)")
+    daylight_lux = Param(
+        10_000.0, unit="lx", min=1.0, max=150_000.0, doc="illuminance the clean frames were exposed for (white = daylight_lux/pi cd/m^2)"
+    )
+    veil_factor = Param(
+        0.3,
+        unit="",
+        min=0.0,
+        max=100.0,
+        doc="lens scatter k in L = 10 k E / theta^2 (1 = the human eye; clean lenses < 1, dirty windscreens > 1)",
+    )
+    ghost_reflectance = Param(
+        5e-5, unit="", min=0.0, max=0.05, doc="share of the light the strongest flare ghost returns (coated lens ~5e-5; 0: no ghosts)"
+    )
+    sky_depth_m = Param(
+        1000.0,
+        unit="m",
+        min=1.0,
+        max=1e7,
+        doc="z-depth from which a pixel counts as open sky (pixels without depth are sky too); nearer surfaces hide the sun",
+    )
+    follow_pose = Param(
+        False, domain="flag", doc="keep the sun fixed in the world with the ground-truth poses (direction given for the first frame)"
+    )
 
     def setup(self, context: ModuleContext) -> None:
         super().setup(context)
@@ -186,7 +211,9 @@ class SunGlare(Perturbation):
             first = context.sequence.records[0].index
             pose = context.pose(first)
             if pose is None:
-                raise ModuleError(f"{self.name}: follow_pose needs per-frame ground-truth poses, and sequence {context.sequence.name!r} has none")
+                raise ModuleError(
+                    f"{self.name}: follow_pose needs per-frame ground-truth poses, and sequence {context.sequence.name!r} has none"
+                )
             self._world = pose[:3, :3] @ sun_direction(self.sun_azimuth_deg, self.sun_elevation_deg)
 
     def cleanup(self) -> None:
@@ -236,7 +263,9 @@ class SunGlare(Perturbation):
     def apply(self, image: np.ndarray, depth: np.ndarray | None, index: int, stream: str) -> np.ndarray:
         self.ready_context()
         if depth is None:
-            raise ModuleError(f"{self.name} needs the depth of each frame to hide a sun behind buildings; run it through sal_modules.perturb(), which picks a depth provider")
+            raise ModuleError(
+                f"{self.name} needs the depth of each frame to hide a sun behind buildings; run it through sal_modules.perturb(), which picks a depth provider"
+            )
         if depth.shape != image.shape[:2]:
             raise ModuleError(f"{self.name}: depth map {depth.shape} does not match the {stream} image {image.shape[:2]} of frame {index}")
         sun = self.sun_image(index, stream, image.shape[0], image.shape[1])

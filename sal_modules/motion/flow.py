@@ -133,7 +133,9 @@ class CleanFrames:
 
     def flow(self, source: int, target: int, stream: str) -> np.ndarray:
         """Dense flow (read-only) from clean frame ``source`` to clean frame ``target``."""
-        return self._cached(self._flows, (source, target, stream), lambda: dense_flow(self._grey(source, stream), self._grey(target, stream)))
+        return self._cached(
+            self._flows, (source, target, stream), lambda: dense_flow(self._grey(source, stream), self._grey(target, stream))
+        )
 
     def _grey(self, position: int, stream: str) -> np.ndarray:
         return self._cached(self._greys, (position, stream), lambda: cv2.cvtColor(self.image(position, stream), cv2.COLOR_RGB2GRAY))

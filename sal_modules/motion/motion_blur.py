@@ -70,7 +70,9 @@ class MotionBlur(Perturbation):
         if depth is None:
             raise ModuleError(f"{self.name} needs the depth of frame {index} ({stream}); sal_modules.perturb() passes it")
         if depth.shape != image.shape[:2]:
-            raise ModuleError(f"{self.name}: depth of frame {index} ({stream}) is {depth.shape[1]}x{depth.shape[0]} px, the image {image.shape[1]}x{image.shape[0]} px")
+            raise ModuleError(
+                f"{self.name}: depth of frame {index} ({stream}) is {depth.shape[1]}x{depth.shape[0]} px, the image {image.shape[1]}x{image.shape[0]} px"
+            )
         h, w = image.shape[:2]
         dx, dy, radius = centred_grid(h, w, camera.cx, camera.cy)
         ratio = _end_ratio(depth, dz)
@@ -125,7 +127,15 @@ def _workspace(height: int, width: int) -> _Workspace:
     return work
 
 
-def _scaled(planes: np.ndarray, dx: np.ndarray, dy: np.ndarray, centre: tuple[np.float32, np.float32], ratio: np.ndarray, work: _Workspace, out: np.ndarray) -> np.ndarray:
+def _scaled(
+    planes: np.ndarray,
+    dx: np.ndarray,
+    dy: np.ndarray,
+    centre: tuple[np.float32, np.float32],
+    ratio: np.ndarray,
+    work: _Workspace,
+    out: np.ndarray,
+) -> np.ndarray:
     """``planes`` sampled at ``c + (x - c) * ratio`` into ``out`` (bilinear, replicated border)."""
     np.multiply(dx, ratio, out=work.map_x)
     np.add(work.map_x, centre[0], out=work.map_x)

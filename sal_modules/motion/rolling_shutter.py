@@ -44,7 +44,9 @@ class RollingShutter(Perturbation):
 
     readout_ms = Param(30.0, unit="ms", min=0.0, max=200.0, searchable=True, worse="higher", doc="time to read the rows out, top to bottom")
     motion = Param(
-        "auto", domain="choice", choices=("auto", "poses", "flow"),
+        "auto",
+        domain="choice",
+        choices=("auto", "poses", "flow"),
         doc="image motion from ground-truth poses and depth, from optical flow, or poses when available (auto)",
     )
 
@@ -60,9 +62,15 @@ class RollingShutter(Perturbation):
         self._depth: DepthLookup | None = None
         if self.motion != "flow":
             self._depth = _depth_of(context)
-            missing = [what for what, ok in (("per-frame ground-truth poses", sequence.groundtruth_is_per_frame), ("depth", self._depth is not None)) if not ok]
+            missing = [
+                what
+                for what, ok in (("per-frame ground-truth poses", sequence.groundtruth_is_per_frame), ("depth", self._depth is not None))
+                if not ok
+            ]
             if missing and self.motion == "poses":
-                raise ModuleError(f"{self.name}: motion='poses' needs {' and '.join(missing)}; {sequence.name!r} ({sequence.sensor}) has none; use motion='flow'")
+                raise ModuleError(
+                    f"{self.name}: motion='poses' needs {' and '.join(missing)}; {sequence.name!r} ({sequence.sensor}) has none; use motion='flow'"
+                )
             if missing:
                 self._depth = None
             else:  # per-frame ground truth: pose p belongs to the frame at position p

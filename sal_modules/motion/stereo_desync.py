@@ -52,7 +52,9 @@ class StereoDesync(Perturbation):
         super().setup(context)
         sequence = context.sequence
         if sequence.sensor != "stereo":
-            raise ModuleError(f"{self.name} needs a stereo sequence; {sequence.name!r} is {sequence.sensor} (no right camera to desynchronise)")
+            raise ModuleError(
+                f"{self.name} needs a stereo sequence; {sequence.name!r} is {sequence.sensor} (no right camera to desynchronise)"
+            )
         if len(sequence) < 2:
             raise ModuleError(f"{self.name} needs at least 2 frames to interpolate in time; {sequence.name!r} has {len(sequence)}")
         self._frames = CleanFrames(sequence, keep=8 + int(np.ceil(self.delay_ms / 1000.0 * sequence.fps)))

@@ -46,7 +46,7 @@ from scipy.spatial import cKDTree
 from sal_modules.optics.lens import LensEffect, Overlay
 from sal_modules.params import Param
 
-__all__ = ["CrackedLens", "CrackNetwork", "grow_cracks"]
+__all__ = ["CrackNetwork", "CrackedLens", "grow_cracks"]
 
 #: Largest impact force (N): the network is grown down to the stress factor T / MAX_FORCE_N.
 MAX_FORCE_N = 5000.0
@@ -169,7 +169,12 @@ class CrackedLens(LensEffect):
     summary = "Cracked lens glass from an impact: stress propagation, spanning-tree secondary cracks, blur"
 
     impact_force_n = Param(
-        500.0, unit="N", min=0.0, max=MAX_FORCE_N, searchable=True, worse="higher",
+        500.0,
+        unit="N",
+        min=0.0,
+        max=MAX_FORCE_N,
+        searchable=True,
+        worse="higher",
         doc="impact force; crack edges break where the propagated stress exceeds break_threshold_n",
     )
     break_threshold_n = Param(300.0, unit="N", min=1.0, max=MAX_FORCE_N, doc="stress at which the glass breaks")

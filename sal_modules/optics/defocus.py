@@ -35,9 +35,9 @@ import cv2
 import numpy as np
 
 from sal_modules.base import ModuleContext, Perturbation
-from sal_modules.work_buffers import scratch
 from sal_modules.errors import ModuleError
 from sal_modules.params import Param
+from sal_modules.work_buffers import scratch
 
 __all__ = ["Defocus", "circle_of_confusion_px", "disk_kernel", "render_layers"]
 
@@ -93,7 +93,11 @@ class Defocus(Perturbation):
     needs_depth = True
 
     f_number = Param(
-        1.4, min=0.95, max=32.0, searchable=True, worse="lower",
+        1.4,
+        min=0.95,
+        max=32.0,
+        searchable=True,
+        worse="lower",
         doc="aperture f-number N (lower = wider aperture = more blur)",
     )
     focus_distance_m = Param(0.5, unit="m", min=0.05, max=100_000.0, doc="distance the lens is focused at")

@@ -47,7 +47,13 @@ class LensSoiling(LensEffect):
     summary = "Out-of-focus dirt particles on the lens, static per sequence, independent per lens"
 
     particles = Param(
-        40, domain="integer", unit="particles", min=0, max=MAX_PARTICLES, searchable=True, worse="higher",
+        40,
+        domain="integer",
+        unit="particles",
+        min=0,
+        max=MAX_PARTICLES,
+        searchable=True,
+        worse="higher",
         doc="number of dirt particles on each lens (the first of a fixed pool)",
     )
     radius_px = Param((12.0, 40.0), domain="vector", length=2, unit="px", min=1.0, max=500.0, doc="particle radius range (min, max)")

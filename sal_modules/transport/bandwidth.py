@@ -127,21 +127,39 @@ class Bandwidth(SequencePerturbation):
     summary = "Video link of limited bandwidth: H.264/H.265 CBR coding (PyAV) at the sequence's fps"
 
     target_mbps = Param(
-        2.0, unit="Mbit/s", min=0.01, max=200.0, searchable=True, worse="lower",
+        2.0,
+        unit="Mbit/s",
+        min=0.01,
+        max=200.0,
+        searchable=True,
+        worse="lower",
         doc="bit rate of the link (the encoder's constant target rate)",
     )
     max_mbps = Param(
-        None, unit="Mbit/s", min=0.01, max=1000.0, optional=True,
+        None,
+        unit="Mbit/s",
+        min=0.01,
+        max=1000.0,
+        optional=True,
         doc="peak rate filling the decoder buffer; None = target_mbps (strict CBR)",
     )
     buffer_mbit = Param(
-        None, unit="Mbit", min=0.001, max=1000.0, optional=True,
+        None,
+        unit="Mbit",
+        min=0.001,
+        max=1000.0,
+        optional=True,
         doc="decoder (VBV) buffer size; None = 0.5 s at the peak rate",
     )
     codec = Param("h264", domain="choice", choices=tuple(CODECS), doc="h264 (libx264) or h265 (libx265)")
     preset = Param("veryfast", domain="choice", choices=PRESETS, doc="encoder speed preset")
     gop_frames = Param(
-        None, domain="integer", unit="frames", min=1, max=100_000, optional=True,
+        None,
+        domain="integer",
+        unit="frames",
+        min=1,
+        max=100_000,
+        optional=True,
         doc="keyframe interval; None = 2 s of frames",
     )
 
@@ -159,7 +177,7 @@ class Bandwidth(SequencePerturbation):
         encoder, _ = CODECS[self.codec]
         try:
             self._av.codec.Codec(encoder, "w")
-        except Exception as exc:  # noqa: BLE001 - PyAV raises several types for a missing codec
+        except Exception as exc:
             raise ModuleError(f"bandwidth: this PyAV build has no {encoder} encoder ({exc})") from exc
         self._encoded: dict[str, _Encoded] = {}
         self._cursors: dict[str, _Cursor] = {}
@@ -182,7 +200,9 @@ class Bandwidth(SequencePerturbation):
                 encoded = _Encoded(width=image.shape[1], height=image.shape[0])
                 encoder = self._open_encoder(image.shape[1] + image.shape[1] % 2, image.shape[0] + image.shape[0] % 2)
             elif image.shape[:2] != (encoded.height, encoded.width):
-                raise ModuleError(f"bandwidth: frame {index} of {stream} is {image.shape[1]}x{image.shape[0]}, the stream is {encoded.width}x{encoded.height}")
+                raise ModuleError(
+                    f"bandwidth: frame {index} of {stream} is {image.shape[1]}x{image.shape[0]}, the stream is {encoded.width}x{encoded.height}"
+                )
             if inputs and index <= inputs[-1]:
                 raise ModuleError(f"bandwidth: frames of {stream} must come in increasing index order (got {index} after {inputs[-1]})")
             picture = self._av.VideoFrame.from_ndarray(_pad_even(image), format="rgb24")

@@ -25,7 +25,12 @@ class FrameDrop(Perturbation):
     drops_frames = True
 
     drop_rate = Param(
-        0.1, unit="", min=0.0, max=1.0, searchable=True, worse="higher",
+        0.1,
+        unit="",
+        min=0.0,
+        max=1.0,
+        searchable=True,
+        worse="higher",
         doc="share of the frames dropped in random mode (0.3 drops 30 %)",
     )
     mode = Param("random", domain="choice", choices=("random", "periodic"), doc="random or periodic drops")

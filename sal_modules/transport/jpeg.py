@@ -42,7 +42,12 @@ class Jpeg(Perturbation):
     summary = "JPEG compression at a quality level (1..100) with chroma subsampling"
 
     quality = Param(
-        30, domain="integer", min=1, max=100, searchable=True, worse="lower",
+        30,
+        domain="integer",
+        min=1,
+        max=100,
+        searchable=True,
+        worse="lower",
         doc="JPEG quality factor (IJG scale; 100 = finest quantisation)",
     )
     chroma_subsampling = Param("4:2:0", domain="choice", choices=tuple(SAMPLING), doc="chroma subsampling (J:a:b)")

@@ -46,10 +46,10 @@ import numpy as np
 
 from sal_adapters.camera import Camera
 from sal_modules.base import ModuleContext, Perturbation
-from sal_modules.work_buffers import scratch
 from sal_modules.colour import DECODE_TABLE, encode_table, srgb_decode, srgb_to_linear
 from sal_modules.params import Param
 from sal_modules.weather.noise import GradientNoise
+from sal_modules.work_buffers import scratch
 
 __all__ = [
     "Fog",
@@ -149,17 +149,31 @@ class Fog(Perturbation):
     needs_depth = True
 
     visibility_m = Param(
-        50.0, unit="m", min=1.0, max=100_000.0, searchable=True, worse="lower",
+        50.0,
+        unit="m",
+        min=1.0,
+        max=100_000.0,
+        searchable=True,
+        worse="lower",
         doc="meteorological visibility: distance at which contrast falls to 2 %",
     )
     atmospheric_light = Param(
-        None, domain="vector", length=3, min=0.0, max=1.0, optional=True,
+        None,
+        domain="vector",
+        length=3,
+        min=0.0,
+        max=1.0,
+        optional=True,
         doc="airlight colour, sRGB-encoded RGB in 0..1; null = estimated once from the first frame",
     )
     heterogeneity = Param(0.0, min=0.0, max=1.0, doc="relative standard deviation of the fog density (0 = homogeneous)")
     noise_scale_m = Param(20.0, unit="m", min=1.0, max=10_000.0, doc="feature size of the fog patches")
     sky_distance_m = Param(
-        None, unit="m", min=0.0, max=1e7, optional=True,
+        None,
+        unit="m",
+        min=0.0,
+        max=1e7,
+        optional=True,
         doc="distance of pixels without depth (sky); null = infinitely far (airlight only)",
     )
 
@@ -239,7 +253,9 @@ class Fog(Perturbation):
         mean[:, 0] = density[:, 0]
         mean[:, 1:] = integral[:, 1:] / shells[1:]
         # atlas (gh, count * gw): shell j occupies columns j * gw ... j * gw + gw - 1
-        atlas = np.ascontiguousarray(mean.reshape(grid.gh, grid.gw, count).transpose(0, 2, 1).reshape(grid.gh, count * grid.gw)).astype(np.float32)
+        atlas = np.ascontiguousarray(mean.reshape(grid.gh, grid.gw, count).transpose(0, 2, 1).reshape(grid.gh, count * grid.gw)).astype(
+            np.float32
+        )
         small = cv2.resize(distance, grid.small, interpolation=cv2.INTER_AREA)
         shell = np.log1p(small * (b / a)) * (1.0 / b)
         shell = np.clip(shell, 0.0, count - 1.0001, out=shell)

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["GradientNoise", "RAW_STD"]
+__all__ = ["RAW_STD", "GradientNoise"]
 
 #: Standard deviation of 3-D gradient noise with unit gradients (empirical, 1e6 points, 3 seeds).
 RAW_STD = 0.1909

@@ -60,13 +60,13 @@ import cv2
 import numpy as np
 
 from sal_modules.base import ModuleContext, Perturbation
-from sal_modules.work_buffers import scratch
 from sal_modules.params import Param
 from sal_modules.weather.fog import (
     blend_srgb,
     first_frame_airlight,
     ray_lengths,
 )
+from sal_modules.work_buffers import scratch
 
 __all__ = ["Particles", "Precipitation"]
 
@@ -124,7 +124,9 @@ class Precipitation(Perturbation):
     exposure_ms = Param(5.0, unit="ms", min=0.1, max=100.0, doc="exposure time: streak length")
     wind_mps = Param(0.0, unit="m/s", min=-40.0, max=40.0, doc="wind speed along the camera's x axis (right = positive)")
     aperture_mm = Param(2.0, unit="mm", min=0.0, max=50.0, doc="entrance pupil diameter: defocus of near particles (focus at infinity)")
-    sky_distance_m = Param(SKY_DISTANCE_M, unit="m", min=0.1, max=1e5, doc="distance of pixels without depth: the cloud base outdoors, the room's size indoors")
+    sky_distance_m = Param(
+        SKY_DISTANCE_M, unit="m", min=0.1, max=1e5, doc="distance of pixels without depth: the cloud base outdoors, the room's size indoors"
+    )
 
     # -- particle physics, per subclass --------------------------------------------------------
     @abstractmethod
@@ -184,7 +186,10 @@ class Precipitation(Perturbation):
         speed = float(self.fall_speed(np.array([self.max_diameter_mm]))[0])
         margin_x = (abs(self.wind_mps) + self.drift_mps) * exposure / 2 + self.aperture_mm / 2000.0
         margin_y = speed * exposure / 2 + self.aperture_mm / 2000.0
-        self._x_range = (-camera.cx / camera.fx * z + min(shift, 0.0) - margin_x, (camera.width - camera.cx) / camera.fx * z + max(shift, 0.0) + margin_x)
+        self._x_range = (
+            -camera.cx / camera.fx * z + min(shift, 0.0) - margin_x,
+            (camera.width - camera.cx) / camera.fx * z + max(shift, 0.0) + margin_x,
+        )
         self._y_range = (-camera.cy / camera.fy * z - margin_y, (camera.height - camera.cy) / camera.fy * z + margin_y)
         area = (self._x_range[1] - self._x_range[0]) * (self._y_range[1] - self._y_range[0])
         # rank envelope: the largest y_R(z) over rates up to each band edge (fine grid in R)
@@ -192,7 +197,9 @@ class Precipitation(Perturbation):
         ranks = np.maximum.accumulate(np.array([self.number_above(r, self._d_vis) for r in fine]), axis=0)
         self._envelope = np.vstack([np.zeros_like(z), ranks[::8]])  # (BANDS + 1, len(z))
         density = area * np.diff(self._envelope, axis=0)  # particles per m of depth, per band
-        cumulative = np.concatenate([np.zeros((BANDS, 1)), np.cumsum(0.5 * (density[:, 1:] + density[:, :-1]) * np.diff(z), axis=1)], axis=1)
+        cumulative = np.concatenate(
+            [np.zeros((BANDS, 1)), np.cumsum(0.5 * (density[:, 1:] + density[:, :-1]) * np.diff(z), axis=1)], axis=1
+        )
         self._expected = cumulative[:, -1]
         self._cdf = cumulative / np.maximum(self._expected[:, None], 1e-300)
 
@@ -269,13 +276,22 @@ class Precipitation(Perturbation):
         centre = particles.position @ to_stream[:3, :3].T + to_stream[:3, 3]
         z = np.maximum(centre[:, 2], 1e-3)
         ends = [centre - velocity * exposure / 2, centre + velocity * exposure / 2]
-        (u0, v0), (u1, v1) = ((camera.fx * e[:, 0] / np.maximum(e[:, 2], 1e-3) + camera.cx, camera.fy * e[:, 1] / np.maximum(e[:, 2], 1e-3) + camera.cy) for e in ends)
+        (u0, v0), (u1, v1) = (
+            (camera.fx * e[:, 0] / np.maximum(e[:, 2], 1e-3) + camera.cx, camera.fy * e[:, 1] / np.maximum(e[:, 2], 1e-3) + camera.cy)
+            for e in ends
+        )
         size = self.size_ratio * d * 1e-3 * camera.fx / z
         blur = self.aperture_mm * 1e-3 * camera.fx / z
         sigma = np.sqrt(size * size + blur * blur) / 4.0
         level = np.clip(np.rint(np.log2(np.maximum(sigma, _SIGMA) / _SIGMA)), 0, LEVELS - 1).astype(np.int64)
         reach = 3.0 * _SIGMA * 2.0**level + 1.0
-        inside = (np.maximum(u0, u1) > -reach) & (np.minimum(u0, u1) < w + reach) & (np.maximum(v0, v1) > -reach) & (np.minimum(v0, v1) < h + reach) & (centre[:, 2] > 0)
+        inside = (
+            (np.maximum(u0, u1) > -reach)
+            & (np.minimum(u0, u1) < w + reach)
+            & (np.maximum(v0, v1) > -reach)
+            & (np.minimum(v0, v1) < h + reach)
+            & (centre[:, 2] > 0)
+        )
         ink = self.opacity * np.pi / 4.0 * size * size
         u0, v0, u1, v1, z, level, ink = (a[inside] for a in (u0, v0, u1, v1, z, level, ink))
         # samples along every streak

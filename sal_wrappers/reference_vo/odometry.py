@@ -21,8 +21,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-from sal_wrappers.reference_vo import geometry as geo
 from sal_wrappers.base import TrackState
+from sal_wrappers.reference_vo import geometry as geo
 from sal_wrappers.reference_vo.bundle import bundle_adjust
 
 __all__ = ["Odometry"]
@@ -367,7 +367,7 @@ class Odometry:
         self.reference = int(np.count_nonzero(good))
         self.t_last, self.prev_grey = init["t"], init["grey"]
         updates: list[Update] = [(init["pos"], TrackState.OK, self.reference, np.eye(4))]
-        for p, tp, g, f in pending:  # the frames in between: matched to the new map
+        for p, _tp, _g, f in pending:  # the frames in between: matched to the new map
             match = geo.brute_match(self.desc, f)
             solved = geo.solve_pnp(self.lens.K, self.X[match >= 0], f.pts[match[match >= 0]], THRESHOLD_PX, 100)
             ok = solved is not None and np.count_nonzero(solved[1]) >= self.min_inliers

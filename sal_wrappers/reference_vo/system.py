@@ -44,9 +44,9 @@ import cv2
 import numpy as np
 
 from sal_adapters import Sequence, Trajectory
-from sal_wrappers.reference_vo import geometry as geo
 from sal_wrappers.base import RunResult, SlamSystem, SlamSystemError, TrackState, file_sha256
 from sal_wrappers.prefetch import prefetched
+from sal_wrappers.reference_vo import geometry as geo
 from sal_wrappers.reference_vo.odometry import Odometry
 
 __all__ = ["ReferenceVO"]
@@ -138,7 +138,7 @@ class ReferenceVO(SlamSystem):
                 odometry = Odometry(
                     lens, mode, size, features=self.features, min_inliers=self.min_inliers, tracker=self.tracker, max_lost=self.max_lost
                 )
-            except Exception as exc:  # noqa: BLE001 - a failure of the system, reported in the result
+            except Exception as exc:
                 failure = _failed(log, exc)
             # decoding errors are the caller's, not the system's: they raise
             for pos, timestamp, image, right, depth in prefetched(_decoded(sequence, mode)) if failure is None else ():
@@ -149,7 +149,7 @@ class ReferenceVO(SlamSystem):
                 t0 = time.perf_counter()
                 try:
                     updates = odometry.step(pos, timestamp, image, right, depth)
-                except Exception as exc:  # noqa: BLE001
+                except Exception as exc:
                     failure = _failed(log, exc, pos)
                     break
                 ms = (time.perf_counter() - t0) * 1000
