@@ -5,6 +5,8 @@ Reads every ``.py`` file's ``import`` statements with ``ast`` (top level and ins
 ``TYPE_CHECKING`` blocks marked as such) and reports:
 
 * an **upward import**: a module importing from a higher layer (``LAYERS`` below, lowest first);
+* a **pytest import below the plugin surface**: only the top-level modules of ``pytest_sal``
+  (plugin, session, api, ...) may import ``pytest`` (or ``_pytest``, ``xdist``, ``pytest_html``);
 * a **cycle** among modules (strongly connected components of more than one module, counting
   imports at every level, ``TYPE_CHECKING`` ones excepted since they never run).
 
@@ -18,6 +20,7 @@ import argparse
 import ast
 import sys
 from collections import defaultdict
+from collections.abc import Iterable
 from pathlib import Path
 
 __all__ = ["LAYERS", "Import", "collect_imports", "find_cycles", "layer_of", "main"]
@@ -39,6 +42,10 @@ LAYERS: list[tuple[str, ...]] = [
     ("pytest_sal.cli",),  # the sal command: argparse and printing
     ("pytest_sal",),  # the plugin surface: plugin, session, api, testing, progress
 ]
+
+
+#: Third-party modules that belong to the plugin surface only.
+PYTEST_MODULES = ("pytest", "_pytest", "xdist", "pytest_html")
 
 
 class Import:
@@ -82,37 +89,62 @@ def collect_imports(modules: dict[str, Path]) -> list[Import]:
     for name, path in modules.items():
         tree = ast.parse(path.read_text(), str(path))
         package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-        _visit(tree, name, package, modules, found, in_function=False, type_checking=False)
+        _visit(tree.body, name, package, modules, found, in_function=False, type_checking=False)
     return found
 
 
 def _visit(
-    node: ast.AST, source: str, package: str, modules: dict[str, Path], found: list[Import], in_function: bool, type_checking: bool
+    nodes: Iterable[ast.AST],
+    source: str,
+    package: str,
+    modules: dict[str, Path],
+    found: list[Import],
+    in_function: bool,
+    type_checking: bool,
 ) -> None:
-    for child in ast.iter_child_nodes(node):
+    """Record the imports among ``nodes`` and their descendants."""
+    for child in nodes:
         if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)):
-            _visit(child, source, package, modules, found, True, type_checking)
+            _visit(ast.iter_child_nodes(child), source, package, modules, found, True, type_checking)
             continue
         if isinstance(child, ast.If) and "TYPE_CHECKING" in ast.unparse(child.test):
-            _visit(child, source, package, modules, found, in_function, True)
-            for other in child.orelse:
-                _visit(other, source, package, modules, found, in_function, type_checking)
+            _visit(child.body, source, package, modules, found, in_function, True)
+            _visit(child.orelse, source, package, modules, found, in_function, type_checking)
             continue
-        targets: list[str] = []
-        if isinstance(child, ast.Import):
-            targets = [alias.name for alias in child.names]
-        elif isinstance(child, ast.ImportFrom):
-            base = child.module or ""
-            if child.level:
-                anchor = package.split(".")
-                anchor = anchor[: len(anchor) - (child.level - 1)]
-                base = ".".join(anchor + ([base] if base else []))
-            targets = [f"{base}.{alias.name}" for alias in child.names] or [base]
-        for target in targets:
-            resolved = resolve(target, modules)
-            if resolved and resolved != source:
-                found.append(Import(source, resolved, child.lineno, in_function, type_checking))
-        _visit(child, source, package, modules, found, in_function, type_checking)
+        if isinstance(child, (ast.Import, ast.ImportFrom)):
+            for target in _targets(child, package):
+                resolved = resolve(target, modules)
+                if resolved and resolved != source:
+                    found.append(Import(source, resolved, child.lineno, in_function, type_checking))
+        _visit(ast.iter_child_nodes(child), source, package, modules, found, in_function, type_checking)
+
+
+def _targets(statement: ast.Import | ast.ImportFrom, package: str) -> list[str]:
+    """The dotted names an import statement asks for (relative ones resolved against ``package``)."""
+    if isinstance(statement, ast.Import):
+        return [alias.name for alias in statement.names]
+    base = statement.module or ""
+    if statement.level:
+        anchor = package.split(".")
+        anchor = anchor[: len(anchor) - (statement.level - 1)]
+        base = ".".join(anchor + ([base] if base else []))
+    return [f"{base}.{alias.name}" for alias in statement.names] or [base]
+
+
+def pytest_imports(modules: dict[str, Path]) -> list[str]:
+    """``module line N imports pytest`` for each module below the plugin surface that imports one
+    of ``PYTEST_MODULES`` (at any level, ``TYPE_CHECKING`` blocks included)."""
+    top = len(LAYERS) - 1
+    found = []
+    for name, path in modules.items():
+        if layer_of(name) == top and name.count(".") == 1:
+            continue
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, (ast.Import, ast.ImportFrom)):
+                for target in _targets(node, name) if isinstance(node, ast.Import) or not node.level else []:
+                    if target.split(".")[0] in PYTEST_MODULES:
+                        found.append(f"{name} line {node.lineno} imports {target}")
+    return found
 
 
 def layer_of(module: str) -> int:
@@ -176,6 +208,7 @@ def main(argv: list[str] | None = None) -> int:
     imports = collect_imports(modules)
     upward = [imp for imp in imports if not imp.type_checking and layer_of(imp.target) > layer_of(imp.source)]
     cycles = find_cycles(imports)
+    pytest_below = pytest_imports(modules)
     if args.modules:
         for imp in sorted(imports, key=lambda i: (i.source, i.line)):
             print(imp)
@@ -189,9 +222,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"upward import: {imp}  (layer {layer_of(imp.source)} imports layer {layer_of(imp.target)})")
     for cycle in cycles:
         print(f"cycle: {' <-> '.join(cycle)}")
-    if not upward and not cycles:
-        print("no upward import, no cycle")
-    return 1 if upward or cycles else 0
+    for line in pytest_below:
+        print(f"pytest below the plugin surface: {line}")
+    if not upward and not cycles and not pytest_below:
+        print("no upward import, no cycle, pytest only in the plugin surface")
+    return 1 if upward or cycles or pytest_below else 0
 
 
 def _package(module: str) -> str:
