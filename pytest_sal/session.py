@@ -406,9 +406,9 @@ class SalSession:
 
     @property
     def machine(self) -> str:
-        """This machine in words (``history.machine_text``), read once."""
+        """This machine in words (``history.provenance.machine_text``), read once."""
         if self._machine is None:
-            from pytest_sal.history.run_history import machine_info, machine_text
+            from pytest_sal.history.provenance import machine_info, machine_text
 
             self._machine = machine_text(machine_info())
         return self._machine
@@ -461,7 +461,7 @@ class SalSession:
         names each file written (``pytest-sal: wrote report/index.html``)."""
         if not self.outcomes:
             return
-        from pytest_sal.history.run_history import commit_info, machine_info
+        from pytest_sal.history.provenance import commit_info, machine_info
 
         commit, dirty = commit_info(self.config.rootpath)
         machine = dict(machine_info(), load_avg_start=self.load_at_start)
