@@ -5,12 +5,16 @@ the outcomes, reports and summary at its end are ``pytest_sal.session_results``.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pytest
 
 from pytest_sal.options import read_options
 from pytest_sal.session_results import SessionResults
+
+if TYPE_CHECKING:
+    from pytest_sal.history.run_history import History
+    from pytest_sal.store.trial_cache import ContentCache
 
 __all__ = ["SAL_SESSION", "SalSession"]
 
@@ -31,8 +35,8 @@ class SalSession:
         self.options = read_options(config)
         self.results = SessionResults(config, self.options)
         self._machine: str | None = None
-        self._cache: Any = None
-        self._history: Any = None
+        self._cache: ContentCache | None = None
+        self._history: History | None = None
         self._datasets: dict[str, Any] = {}
 
     @property
@@ -42,7 +46,8 @@ class SalSession:
 
     # -- collaborators -------------------------------------------------------------------------
     @property
-    def cache(self) -> Any:
+    def cache(self) -> ContentCache | None:
+        """The trial cache (``None`` under ``--sal-no-cache``), opened when first needed."""
         if self._cache is None and self.options.use_cache:
             from pytest_sal.store.trial_cache import ContentCache
 
@@ -50,7 +55,8 @@ class SalSession:
         return self._cache
 
     @property
-    def history(self) -> Any:
+    def history(self) -> History:
+        """The run history, opened when first needed."""
         if self._history is None:
             from pytest_sal.history.run_history import History
 
