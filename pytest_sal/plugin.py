@@ -15,7 +15,9 @@ from typing import Any
 
 import pytest
 
-from pytest_sal.session import SAL_SESSION, SalSession, add_options, outcome_of
+from pytest_sal.options import add_options
+from pytest_sal.session import SAL_SESSION, SalSession
+from pytest_sal.session_results import outcome_of
 
 __all__ = [
     "PendingSearch",

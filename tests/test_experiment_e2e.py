@@ -2,7 +2,7 @@
 ``sal features``) through ``pytest_sal.cli.main.main``, on the synthetic urban stereo world, with the
 REAL systems ``orbslam3`` (pyorbslam3 wheel, child process, the session's vocabulary) and
 ``reference_vo``; every output tree is checked file by file, and its contents against what
-``pytest_sal.analysis.metrics`` computes from the files written.
+``pytest_sal.analysis.trajectory_errors`` computes from the files written.
 
 One test per (command, system): each runs the command itself, so that pytest-xdist never runs
 the same expensive command twice on two workers (module fixtures are per worker).
@@ -41,7 +41,7 @@ import numpy as np
 import pytest
 import yaml
 
-from pytest_sal.analysis.metrics import ate, rpe
+from pytest_sal.analysis.trajectory_errors import ate, rpe
 from pytest_sal.cli.boundary import TRACKING_FAIL_RATE, linear_sweep_trials
 from pytest_sal.cli.evaluate import SUMMARY_METRICS
 from pytest_sal.cli.main import main
@@ -282,7 +282,7 @@ def test_evaluate_writes_the_paper_tree(
             assert record["run"] == k and record["system"] == system and record["sensor"] == "stereo"
             assert record["frames"] == FRAMES and record["align"] == record["alignment"]["method"] == "se3"
             assert record["tracking_rate"] == record["tracked"] / FRAMES >= 0.9
-            # the ATE and RPE written are what pytest_sal.analysis.metrics gives for the written trajectory
+            # the ATE and RPE written are what pytest_sal.analysis.trajectory_errors gives for the written trajectory
             max_diff = record["alignment"]["max_diff_s"]
             assert max_diff == pytest.approx(0.5 / clean.fps)
             again = ate(traj, groundtruth, align="se3", max_diff=max_diff)

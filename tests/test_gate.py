@@ -15,8 +15,9 @@ from test_history import FOG, drop, fog, save
 
 from pytest_sal.cli.main import main
 from pytest_sal.history.gate import NOT_COMPARED, compare_with_baseline, space_form_problem
+from pytest_sal.history.provenance import machine_info, machine_text
 from pytest_sal.history.regression import BoundaryCheck
-from pytest_sal.history.run_history import History, machine_info, machine_text
+from pytest_sal.history.run_history import History
 from sal_wrappers import create
 
 TEN_PERCENT = [BoundaryCheck(10.0, True)]

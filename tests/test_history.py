@@ -17,8 +17,9 @@ import pytest
 from pytest_sal.cli.history import history_figure
 from pytest_sal.cli.main import main
 from pytest_sal.engine.outcome import Boundary, Outcome, Trial
+from pytest_sal.history.provenance import commit_info, machine_info
 from pytest_sal.history.regression import BoundaryCheck, MetricCheck, edge_trial, parse_compare_fail, regressions, warm_start
-from pytest_sal.history.run_history import History, commit_info, machine_info, outcome_key
+from pytest_sal.history.run_history import History, outcome_key
 from sal_adapters import SalError
 
 FOG = "tests/test_fog.py::test_fog_visibility"

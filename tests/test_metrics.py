@@ -15,17 +15,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from pytest_sal.analysis.metrics import (
-    AGGREGATED,
-    RunMetrics,
-    aggregate,
-    associate,
-    ate,
-    default_max_diff,
-    evaluate,
-    rpe,
-    scale_error,
-)
+from pytest_sal.analysis.metrics import AGGREGATED, RunMetrics, aggregate, evaluate
+from pytest_sal.analysis.trajectory_errors import associate, ate, default_max_diff, rpe, scale_error
 from sal_adapters.errors import SalError
 from sal_adapters.trajectory import Trajectory
 from sal_wrappers.base import RunResult, TrackState

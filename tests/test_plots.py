@@ -9,8 +9,8 @@ import matplotlib
 import numpy as np
 import pytest
 
-from pytest_sal.analysis.metrics import ate
 from pytest_sal.analysis.plots import ate_figure, plot_ate_over_time, plot_trajectories, save_png, trajectory_figure
+from pytest_sal.analysis.trajectory_errors import ate
 from sal_adapters.errors import SalError
 from sal_adapters.trajectory import Trajectory
 

@@ -2,7 +2,7 @@
 KITTI / EuRoC excerpts, states, determinism, blank frames, options, timeout and failures.
 
 Figures measured (OpenCV 5.0.0, one core: ``taskset -c 0`` and ``cv2.setNumThreads(1)``, on a
-shared, loaded machine, so fps varies by +-25 %; ATE = RMSE of ``pytest_sal.analysis.metrics.ate``, i.e.
+shared, loaded machine, so fps varies by +-25 %; ATE = RMSE of ``pytest_sal.analysis.trajectory_errors.ate``, i.e.
 evo's APE translation part, SE(3) alignment, Sim(3) for mono; fps = frames / time in the
 tracking calls, decoding excluded):
 
@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pytest_sal.analysis.metrics import ate
+from pytest_sal.analysis.trajectory_errors import ate
 from sal_adapters import Camera, FrameRecord, Sequence, open_dataset
 from sal_adapters.errors import DatasetWarning
 from sal_wrappers import RunResult, SlamSystemError, TrackState, create

@@ -28,7 +28,7 @@ from tqdm import tqdm
 from pytest_sal.analysis.plots import save_png
 from pytest_sal.analysis.superpoint import SuperPointExtractor
 from sal_adapters.errors import SalError
-from sal_adapters.sequence import Sequence
+from sal_adapters.sequence import Frame, Sequence
 from sal_adapters.textfiles import atomic_write_text
 
 __all__ = [
@@ -75,7 +75,7 @@ class OrbExtractor:
             raise SalError(f"ORB needs at least 1 feature per frame, got {features}")
         self.features = int(features)
         self.max_distance = int(max_distance)
-        self._orb = cv2.ORB_create(nfeatures=self.features)
+        self._orb = cv2.ORB.create(nfeatures=self.features)
         self._matcher = cv2.BFMatcher(cv2.NORM_HAMMING, crossCheck=True)
 
     def __repr__(self) -> str:
@@ -181,7 +181,7 @@ class TrackingStats:
         }
 
 
-def track_features(sequence: Sequence | Iterable[np.ndarray], extractor: FeatureExtractor, max_frames: int | None = None) -> TrackingStats:
+def track_features(sequence: Iterable[Frame | np.ndarray], extractor: FeatureExtractor, max_frames: int | None = None) -> TrackingStats:
     """Detect in every frame of ``sequence`` (its left images, or any iterable of images) and
     match each frame to the next; the first ``max_frames`` frames only when given."""
     detections: list[int] = []
@@ -192,7 +192,7 @@ def track_features(sequence: Sequence | Iterable[np.ndarray], extractor: Feature
     for position, item in enumerate(sequence):
         if max_frames is not None and position >= max_frames:
             break
-        image = item.image if hasattr(item, "image") else item
+        image = item.image if isinstance(item, Frame) else item
         keypoints, descriptors = extractor.detect(_grey(image))
         ids = np.full(len(keypoints), -1, dtype=np.int64)
         if previous is not None:

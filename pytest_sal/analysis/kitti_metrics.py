@@ -17,7 +17,7 @@ fixed path length, as the KITTI odometry devkit (``evaluate_odometry.cpp``) defi
 Where pytest-sal has to go beyond the devkit:
 
 * **frames** are the reference's poses, in its order (KITTI's ground truth has one per frame);
-  the estimate is paired with them by timestamp (``metrics.associate``);
+  the estimate is paired with them by timestamp (``trajectory_errors.associate``);
 * **tracking lost**: the devkit needs a pose in every frame. A segment whose first or last
   frame has no estimated pose is skipped; when none is left the metric is ``None`` with a reason;
 * **short sequences**: the devkit's 100 .. 800 m give no segment on a short excerpt (KITTI 07's
@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pytest_sal.analysis.kitti_segments import KITTI_SEGMENTS_M, KITTI_STEP, parse_segments, segment_lengths
-from pytest_sal.analysis.metrics import Align, AteResult, ate, relative_errors
+from pytest_sal.analysis.trajectory_errors import Align, AteResult, ate, relative_errors
 from sal_adapters.errors import SalError
 from sal_adapters.trajectory import Trajectory
 
@@ -171,5 +171,5 @@ def kitti_odometry(
     step: int = KITTI_STEP,
 ) -> KittiResult:
     """``t_rel`` (%) and ``r_rel`` (deg/100 m) of ``estimate`` against ``reference``: paired and
-    aligned as ``metrics.ate`` does (``sim3`` for a monocular estimate), then ``kitti_from_ate``."""
+    aligned as ``trajectory_errors.ate`` does (``sim3`` for a monocular estimate), then ``kitti_from_ate``."""
     return kitti_from_ate(ate(estimate, reference, align=align, max_diff=max_diff, fps=fps), reference, segments_m=segments_m, step=step)

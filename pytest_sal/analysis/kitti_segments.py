@@ -19,11 +19,11 @@ KITTI_STEP = 10
 
 def segment_lengths(lengths: Iterable[float]) -> tuple[float, ...]:
     """``lengths`` (m) as sorted distinct floats; ``SalError`` unless each is a finite number > 0."""
-    items = list(lengths) if not isinstance(lengths, (str, bytes)) else [lengths]
-    numbers = [v for v in items if isinstance(v, Real) and not isinstance(v, bool)]
+    items: list[object] = [lengths] if isinstance(lengths, (str, bytes)) else list(lengths)
+    numbers = [float(v) for v in items if isinstance(v, Real) and not isinstance(v, bool)]
     if not items or len(numbers) != len(items) or not all(math.isfinite(v) and v > 0 for v in numbers):
         raise SalError(f"KITTI segment lengths must be one or more numbers > 0 (m), got {items!r}")
-    return tuple(sorted({float(v) for v in numbers}))
+    return tuple(sorted(set(numbers)))
 
 
 def parse_segments(text: str) -> tuple[float, ...]:

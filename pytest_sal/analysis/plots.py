@@ -10,13 +10,14 @@ from __future__ import annotations
 
 import io
 from pathlib import Path
+from typing import IO, Any
 
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from pytest_sal.analysis.metrics import AteResult
+from pytest_sal.analysis.trajectory_errors import AteResult
 from sal_adapters.errors import SalError
 from sal_adapters.textfiles import atomic_write
 from sal_adapters.trajectory import Trajectory
@@ -28,7 +29,7 @@ PLANES = ("xy", "xz", "yz", "yx", "zx", "zy")
 FIGSIZE = (8.0, 6.0)  # inches
 DPI = 100
 ALIGN_NAMES = {"se3": "SE(3) aligned", "sim3": "Sim(3) aligned", "none": "not aligned"}
-REFERENCE_STYLE = dict(color="0.2", linestyle="--", linewidth=1.1, zorder=3)  # on top, estimates show through
+REFERENCE_STYLE: dict[str, Any] = dict(color="0.2", linestyle="--", linewidth=1.1, zorder=3)  # on top, estimates show through
 #: a time step longer than this many median steps, and than GAP_MIN_S, is left as a gap
 GAP_STEPS = 5.0
 GAP_MIN_S = 0.5
@@ -49,7 +50,9 @@ def trajectory_figure(
         raise SalError("nothing to plot: the reference and every estimate are empty")
     axes = _plane_axes(shown[0].positions, plane)
     fig, ax = _figure()
-    lines = [("reference", reference, REFERENCE_STYLE)] if reference is not None and len(reference) else []
+    lines: list[tuple[str, Trajectory, dict[str, Any]]] = []
+    if reference is not None and len(reference):
+        lines.append(("reference", reference, REFERENCE_STYLE))
     lines += [(name, t, dict(linewidth=1.4)) for name, t in estimates.items() if len(t)]
     for name, traj, style in lines:
         xy = traj.positions[:, axes]
@@ -103,7 +106,12 @@ def plot_ate_over_time(ate_results: dict[str, AteResult], path: str | Path, *, t
 
 def save_png(fig: Figure, path: str | Path) -> Path:
     """Render ``fig`` to ``path`` as a PNG, atomically (``sal_adapters.textfiles.atomic_write``)."""
-    return atomic_write(path, lambda handle: handle.write(png_bytes(fig)), binary=True)
+    png = png_bytes(fig)
+
+    def write(handle: IO[Any]) -> None:
+        handle.write(png)
+
+    return atomic_write(path, write, binary=True)
 
 
 def png_bytes(fig: Figure) -> bytes:

@@ -85,7 +85,8 @@ def compare_runs(baseline: RunRecord, run: RunRecord, checks: list[RegressionChe
 
 def _run_compare(args: argparse.Namespace) -> int:
     from pytest_sal.cli.history import change_text, print_table
-    from pytest_sal.history.run_history import History, machine_text
+    from pytest_sal.history.provenance import machine_text
+    from pytest_sal.history.run_history import History
 
     history = History(args.history_dir)
     baseline, run = history.find_runs(args.ref)[-1], history.find_runs(args.run_ref)[-1]

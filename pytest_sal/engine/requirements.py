@@ -251,7 +251,7 @@ def _check_options(options: Mapping[str, Any], envelope: Bound | None) -> None:
         if value is not None and (not isinstance(value, int) or isinstance(value, bool) or value < 1):
             raise InvalidRequirement(f"sal.require(): {name} must be a whole number >= 1, got {value!r}")
     tolerance = options.get("tolerance")
-    if tolerance is not None and (not isinstance(tolerance, numbers.Real) or not math.isfinite(tolerance) or not tolerance > 0):
+    if tolerance is not None and (not isinstance(tolerance, numbers.Real) or not math.isfinite(tolerance) or tolerance <= 0):
         raise InvalidRequirement(f"sal.require(): tolerance must be a number > 0 in the parameter's unit, got {tolerance!r}")
     search_range = options.get("search_range")
     if search_range is not None:

@@ -1,5 +1,6 @@
 """Run history: one JSON file per test session (the regression checks against it are in
-``pytest_sal.history.regression``).
+``pytest_sal.history.regression``, the machine and commit each run records in
+``pytest_sal.history.provenance``).
 
 A run is written by ``History.append_run`` as ``NNNN_<commit>_<UTC time>[_<name>].json`` under
 the history root (default ``.sal/history``)::
@@ -24,17 +25,16 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import platform
 import re
-import subprocess
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
 from pytest_sal.engine.outcome import Outcome
+from pytest_sal.history.provenance import commit_info, machine_info
 from sal_adapters.errors import SalError
 from sal_adapters.textfiles import atomic_write_text
 
@@ -44,10 +44,6 @@ __all__ = [
     "History",
     "OutcomeKey",
     "RunRecord",
-    "commit_info",
-    "cpu_model",
-    "machine_info",
-    "machine_text",
     "outcome_key",
 ]
 
@@ -65,71 +61,6 @@ _NUMBERS = ".numbers"  # reservations of run numbers, one empty file each
 def outcome_key(outcome: Outcome) -> OutcomeKey:
     """``(test_id, system, dataset)``: what makes two outcomes of different runs comparable."""
     return (outcome.test_id, outcome.system, outcome.dataset)
-
-
-# -- where a run was made ---------------------------------------------------------------------
-
-
-def machine_info() -> dict[str, Any]:
-    """``hostname``, ``platform``, ``machine`` (CPU architecture), ``cpu_model``, ``cpu_count``,
-    ``usable_cpus`` (this process's CPU affinity), ``load_avg`` (1, 5, 15 min run-queue
-    averages now), ``python``."""
-    return {
-        "hostname": platform.node(),
-        "platform": platform.platform(),
-        "machine": platform.machine(),
-        "cpu_model": cpu_model(),
-        "cpu_count": os.cpu_count(),
-        "usable_cpus": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
-        "load_avg": [round(x, 2) for x in os.getloadavg()] if hasattr(os, "getloadavg") else None,
-        "python": f"{platform.python_implementation()} {platform.python_version()}",
-    }
-
-
-def cpu_model() -> str:
-    """The CPU's model name (``/proc/cpuinfo``'s first ``model name``; ``platform.processor()``
-    elsewhere), or ``""``."""
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as info:
-            for line in info:
-                key, _, value = line.partition(":")
-                if key.strip() in ("model name", "Model", "cpu model"):
-                    return " ".join(value.split())
-    except OSError:
-        pass
-    return platform.processor() or ""
-
-
-def machine_text(info: dict[str, Any]) -> str:
-    """The machine as results depend on it: ``Intel Xeon Gold 6230 (2 cores)``."""
-    cores = info.get("usable_cpus") or info.get("cpu_count")
-    model = info.get("cpu_model") or info.get("machine") or "unknown CPU"
-    return f"{model} ({cores} cores)" if cores else str(model)
-
-
-def commit_info(cwd: str | Path | None = None) -> tuple[str, bool]:
-    """``(short commit, dirty)`` of the git work tree at ``cwd`` (default: the working directory).
-
-    ``dirty``: tracked files differ from the commit (``git status --porcelain
-    --untracked-files=no``; untracked files, the history itself among them, do not count).
-    Without git, outside a repository, or before the first commit: ``("", False)``, no error.
-    """
-
-    def git(*args: str) -> str | None:
-        try:
-            done = subprocess.run(["git", *args], cwd=cwd, capture_output=True, text=True, timeout=20, check=False)
-        except (OSError, subprocess.SubprocessError):
-            return None
-        return done.stdout if done.returncode == 0 else None
-
-    commit = git("rev-parse", "--short", "HEAD")
-    if not commit or not commit.strip():
-        return "", False
-    status = git("status", "--porcelain", "--untracked-files=no")
-    return commit.strip(), bool(status and status.strip())
-
-
-# -- the store --------------------------------------------------------------------------------
 
 
 @dataclass
@@ -159,11 +90,13 @@ class RunRecord:
     def label(self) -> str:
         return f"{self.number:04d}"
 
-    def get(self, key: OutcomeKey) -> Outcome | None:
-        """The outcome with ``key`` in this run (the last one, should it appear twice)."""
+    def get(self, key: Sequence[str]) -> Outcome | None:
+        """The outcome with ``key`` (``(test_id, system, dataset)``, a list read from JSON too) in
+        this run (the last one, should it appear twice)."""
+        wanted = tuple(key)
         found = None
         for outcome in self.outcomes:
-            if outcome_key(outcome) == key:
+            if outcome_key(outcome) == wanted:
                 found = outcome
         return found
 
@@ -304,7 +237,7 @@ class History:
         last = ref in (None, "last")
         runs = self.runs() if last else self.find_runs(str(ref))
         for run in reversed(runs):
-            outcome = run.get(tuple(outcome_key))  # type: ignore[arg-type]
+            outcome = run.get(outcome_key)
             if outcome is not None and not (last and outcome.regression):
                 return run, outcome
         return None
