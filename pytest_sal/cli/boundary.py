@@ -132,12 +132,8 @@ def run_boundary(
     from pytest_sal.engine.requirement_runner import SearchSettings, search_outcome
     from pytest_sal.engine.requirements import Requirement, ate_rmse, tracking_rate
     from pytest_sal.engine.trial_runner import TrialRunner
-    from pytest_sal.experiment.config import (
-        ConfigError,
-        build_module,
-        build_sequence,
-        load_config,
-    )
+    from pytest_sal.experiment.config import ConfigError, build_sequence, load_config
+    from pytest_sal.experiment.schema import build_module
     from pytest_sal.report.html import metric_plot
     from pytest_sal.store.trial_cache import command_cache
 

@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from pytest_sal.cli.arg_types import add_cache_arguments, add_slam_arguments
-from pytest_sal.experiment.config import BASELINE
+from pytest_sal.experiment.schema import BASELINE
 from sal_adapters.atomic import Replacement
 from sal_adapters.errors import SalError
 from sal_adapters.textfiles import atomic_write

@@ -12,16 +12,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from pytest_sal.cli.arg_types import add_cache_arguments
-from pytest_sal.experiment.config import (
-    BoundaryConfig,
-    ConfigError,
-    ExperimentConfig,
-    build_module,
-    build_modules,
-    build_sequence,
-    load_config,
-    perturbed_sequences,
-)
+from pytest_sal.experiment.config import ConfigError, build_modules, build_sequence, load_config, perturbed_sequences
+from pytest_sal.experiment.schema import BoundaryConfig, ExperimentConfig, build_module
 from sal_adapters.atomic import Replacement, copy_tree, writing
 from sal_adapters.cache_dir import no_cache_writes
 from sal_adapters.datasets import WRITTEN_MARKER, write_sequence
