@@ -43,10 +43,10 @@ import yaml
 
 from pytest_sal.analysis.metrics import ate, rpe
 from pytest_sal.cli.boundary import TRACKING_FAIL_RATE, linear_sweep_trials
-from pytest_sal.cli.evaluate import SUMMARY_METRICS
 from pytest_sal.cli.main import main
 from pytest_sal.engine.boundary_search import TERMINATIONS
 from pytest_sal.experiment.config import build_modules, build_sequence, load_config
+from pytest_sal.experiment.evaluate import SUMMARY_METRICS
 from sal_adapters import open_dataset
 from sal_adapters.trajectory import Trajectory
 from sal_modules import perturb
