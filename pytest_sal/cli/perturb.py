@@ -9,13 +9,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from pytest_sal.cli.arg_types import add_cache_arguments
+from pytest_sal.experiment.boundary import boundary_parameter
 from pytest_sal.experiment.config import load_config
 from pytest_sal.experiment.perturb import PerturbPlan, plan_perturbations, write_perturbations
-from pytest_sal.experiment.schema import BoundaryConfig, ExperimentConfig, build_module
 
 if TYPE_CHECKING:  # numpy and the modules load when a command runs, not for `sal --help`
     from sal_modules.base import Perturbation
-    from sal_modules.params import Param
 
 __all__ = ["add_experiment_commands"]
 
@@ -44,17 +43,6 @@ def _fmt(value: Any) -> str:
     return repr(value) if isinstance(value, str) else str(value)
 
 
-def _boundary_param(config: ExperimentConfig, rb: BoundaryConfig) -> Param:
-    """The declared parameter the boundary block searches."""
-    from sal_modules.chain import Composite
-
-    module = build_module(config.perturbation(rb.target_perturbation))
-    assert module is not None  # the config validation refuses type none
-    if isinstance(module, Composite):
-        return module.param(rb.parameter)[1]
-    return type(module).parameters()[rb.parameter]
-
-
 def _print_plan(plan: PerturbPlan) -> None:
     """The experiment, the dataset, each perturbation with its module and folder, and the
     boundary block."""
@@ -71,7 +59,7 @@ def _print_plan(plan: PerturbPlan) -> None:
     rb = config.robustness_boundary
     if rb is not None:
         state = "enabled" if rb.enabled else "disabled"
-        scale = _boundary_param(config, rb).search_space()
+        scale = boundary_parameter(config, rb).param.search_space()
         unit = f" {scale.unit}" if scale.unit else ""
         print(
             f"boundary    {rb.name} ({state}): {rb.target_perturbation}.{rb.parameter} in {rb.lower_bound:g} .. {rb.upper_bound:g}{unit}, "
