@@ -17,12 +17,8 @@ import pytest
 import yaml
 
 from pytest_sal.cli.main import main
-from pytest_sal.experiment.config import (
-    ExperimentConfig,
-    build_module,
-    build_sequence,
-    load_config,
-)
+from pytest_sal.experiment.config import build_sequence, load_config
+from pytest_sal.experiment.schema import ExperimentConfig, build_module
 from sal_adapters import DatasetWarning, open_dataset
 from sal_adapters.images import read_image
 from sal_modules import Composite, module_class

@@ -42,11 +42,11 @@ import pytest
 import yaml
 
 from pytest_sal.analysis.trajectory_errors import ate, rpe
-from pytest_sal.cli.boundary import TRACKING_FAIL_RATE, linear_sweep_trials
-from pytest_sal.cli.evaluate import SUMMARY_METRICS
 from pytest_sal.cli.main import main
 from pytest_sal.engine.boundary_search import TERMINATIONS
+from pytest_sal.experiment.boundary import TRACKING_FAIL_RATE, linear_sweep_trials
 from pytest_sal.experiment.config import build_modules, build_sequence, load_config
+from pytest_sal.experiment.evaluate import SUMMARY_METRICS
 from sal_adapters import open_dataset
 from sal_adapters.trajectory import Trajectory
 from sal_modules import perturb
@@ -378,7 +378,12 @@ def verdict(metrics: dict[str, Any]) -> str:
 
 def without_cache_fields(trials: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Trials as compared between a run and its cached rerun (``cached`` and timing differ)."""
-    return [{k: v for k, v in t.items() if k not in ("cached", "wall_time_s")} for t in trials]
+    return [{k: v for k, v in t.items() if k not in ("cached", "wall_time_s", "runs")} for t in trials]
+
+
+def votes(trial: dict[str, Any]) -> tuple[int, int]:
+    """(runs that agree with the trial's verdict, runs) of a trial of ``Outcome.to_dict``."""
+    return sum(r["passed"] == trial["passed"] for r in trial["runs"]), len(trial["runs"])
 
 
 @pytest.mark.parametrize("system", SYSTEM_NAMES)
@@ -392,59 +397,62 @@ def test_boundary_brackets_the_fog_failure_and_a_rerun_reads_the_cache(
     folder = tmp_path / "results" / NAME / "robustness_boundary" / system / BOUNDARY["name"]
     assert sorted(p.name for p in (tmp_path / "results" / NAME).iterdir()) == ["robustness_boundary"]
     summary = read(folder / "boundary_summary.json")
-    trials = summary["trials"]
+    assert set(summary) == {"outcome", "experiment"}  # Outcome.to_dict(), and what only the experiment knows
+    outcome, experiment = summary["outcome"], summary["experiment"]
+    trials = outcome["trials"]
     n = len(trials)
-    runs = sum(t["runs"] for t in trials)
+    runs = sum(len(t["runs"]) for t in trials)
 
     # the tree: the summary, the plot, and one work folder per SLAM run: one run per trial for
     # the deterministic reference VO, a vote of at least 2 for ORB-SLAM3
     run_dirs = sorted(p.name for p in (folder / "runs").iterdir())
-    assert len(run_dirs) == runs == summary["runs_used"] == len(slam_calls)
-    assert all(t["runs"] == 1 for t in trials) if system == "reference_vo" else all(t["runs"] >= 2 for t in trials)
+    assert len(run_dirs) == runs == len(slam_calls)
+    assert all(len(t["runs"]) == 1 for t in trials) if system == "reference_vo" else all(len(t["runs"]) >= 2 for t in trials)
     assert {f for f in files_under(folder) if not f.startswith("runs/")} == {"boundary_summary.json", "boundary_plot.png"}
     assert all((folder / "runs" / d / f"{system}.log").is_file() for d in run_dirs)
     assert png_size(folder / "boundary_plot.png")
-    assert summary["plot"] == str(folder / "boundary_plot.png")
+    assert experiment["plot"] == str(folder / "boundary_plot.png")
 
-    assert summary["system"] == system and summary["parameter"] == "fog.visibility_m" and summary["unit"] == "m"
-    assert summary["worse"] == "lower" and summary["edge"] == BOUNDARY["upper"]
+    assert outcome["system"] == system and outcome["parameter"] == "fog.visibility_m" and outcome["boundary"]["unit"] == "m"
+    assert outcome["worse"] == "lower" and outcome["edge"] == BOUNDARY["upper"]
     assert (
-        summary["requirement"]
+        outcome["requirement"]
         == f"ate_rmse < {BOUNDARY['ate_rmse_fail']:g} m and tracking_rate >= 0.5 wherever fog.visibility_m >= {BOUNDARY['upper']} m"
     )
-    assert (summary["lower_bound"], summary["upper_bound"], summary["tolerance"], summary["max_iters"]) == (
+    assert (experiment["lower_bound"], experiment["upper_bound"], experiment["tolerance"], experiment["max_iters"]) == (
         BOUNDARY["lower"],
         BOUNDARY["upper"],
         BOUNDARY["tolerance"],
         BOUNDARY["max_iters"],
     )
-    assert summary["seed"] == SEED and summary["dataset"] == "synthetic/urban-seed0"
-    assert summary["linear_sweep_trials"] == linear_sweep_trials(BOUNDARY["lower"], BOUNDARY["upper"], BOUNDARY["tolerance"]) == 101
-    assert summary["trials_used"] == n <= BOUNDARY["max_iters"]
+    assert outcome["seed"] == SEED and outcome["dataset"] == "synthetic/urban-seed0"
+    assert experiment["linear_sweep_trials"] == linear_sweep_trials(BOUNDARY["lower"], BOUNDARY["upper"], BOUNDARY["tolerance"]) == 101
+    assert n <= BOUNDARY["max_iters"]
 
     # every trial: value, metrics, verdict, and the verdict is the requirement applied to its metrics
     for t in trials:
-        assert set(t) >= {"value", "metrics", "verdict", "failed", "cached", "runs", "votes"}
+        assert set(t) >= {"value", "metrics", "passed", "failed", "cached", "runs"}
         assert BOUNDARY["lower"] <= t["value"] <= BOUNDARY["upper"]
-        if t["votes"].startswith(f"{t['runs']} of {t['runs']} "):  # unanimous: the median run agrees
-            assert t["verdict"] == verdict(t["metrics"]), t
-        assert (t["verdict"] == "fail") == bool(t["failed"]) and t["cached"] is False
+        agreeing, voting = votes(t)
+        if agreeing == voting:  # unanimous: the median run agrees
+            assert ("pass" if t["passed"] else "fail") == verdict(t["metrics"]), t
+        assert (not t["passed"]) == bool(t["failed"]) and t["cached"] is False
     # the mild end passes (clean-looking air), the severe end fails (2 m: nothing tracked)
-    assert (trials[0]["value"], trials[0]["verdict"]) == (BOUNDARY["upper"], "pass")
-    assert (trials[1]["value"], trials[1]["verdict"]) == (BOUNDARY["lower"], "fail")
+    assert (trials[0]["value"], trials[0]["passed"]) == (BOUNDARY["upper"], True)
+    assert (trials[1]["value"], trials[1]["passed"]) == (BOUNDARY["lower"], False)
     assert trials[1]["metrics"]["tracking_rate"] == 0.0 and trials[1]["metrics"]["ate_rmse"] is None
-    assert summary["edge_verdict"] == "passed"
+    assert outcome["verdict"] == "passed"
 
     # pass_value / fail_value bracket the boundary on the side where visibility gets worse (lower)
-    passing = [t["value"] for t in trials if t["verdict"] == "pass"]
-    failing = [t["value"] for t in trials if t["verdict"] == "fail"]
-    pass_value, fail_value = summary["pass_value"], summary["fail_value"]
+    passing = [t["value"] for t in trials if t["passed"]]
+    failing = [t["value"] for t in trials if not t["passed"]]
+    pass_value, fail_value = outcome["boundary"]["pass_value"], outcome["boundary"]["fail_value"]
     assert BOUNDARY["lower"] <= fail_value < pass_value <= BOUNDARY["upper"]
     assert pass_value in passing and fail_value in failing
     assert not [t["value"] for t in trials if fail_value < t["value"] < pass_value]  # the tightest bracket
-    assert summary["termination"] in TERMINATIONS
+    assert outcome["termination"] in TERMINATIONS
     if pass_value - fail_value > BOUNDARY["tolerance"]:
-        assert summary["termination"] == "max_trials" and n == BOUNDARY["max_iters"]
+        assert outcome["termination"] == "max_trials" and n == BOUNDARY["max_iters"]
     assert f"{n} trials, {runs} runs (0 trials cached) vs 101 for a linear sweep" in out
     assert len([line for line in out.splitlines() if line.lstrip().startswith("step ")]) >= n
 
@@ -454,10 +462,11 @@ def test_boundary_brackets_the_fog_failure_and_a_rerun_reads_the_cache(
     out = capsys.readouterr().out
     assert slam_calls == []
     assert sorted(p.name for p in (folder / "runs").iterdir()) == run_dirs
-    again = read(folder / "boundary_summary.json")
+    again = read(folder / "boundary_summary.json")["outcome"]
     assert all(t["cached"] for t in again["trials"])
     assert without_cache_fields(again["trials"]) == without_cache_fields(trials)
-    assert (again["pass_value"], again["fail_value"], again["termination"]) == (pass_value, fail_value, summary["termination"])
+    assert [votes(t) for t in again["trials"]] == [votes(t) for t in trials]
+    assert (again["boundary"], again["termination"]) == (outcome["boundary"], outcome["termination"])
     assert f"{n} trials, {runs} runs ({n} trials cached)" in out
 
 

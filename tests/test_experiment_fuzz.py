@@ -33,7 +33,7 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from pytest_sal.experiment import config as schema
+from pytest_sal.experiment import schema
 from pytest_sal.experiment.config import build_modules, build_sequence, load_config
 from sal_adapters import DATASETS, SalError
 from sal_adapters.cache_dir import no_cache_writes
@@ -233,7 +233,7 @@ MODULES = [name for name in PERTURBATIONS.names() if name != "composite"]
 KINDS = DATASETS.names()
 #: Every key the schema knows: sections, dataset options, module parameters.
 SCHEMA_KEYS = sorted(
-    {*schema._TOP, *schema._DATASET, *schema._BOUNDARY, *schema._PERTURBATION, *schema._COMPOSITE}
+    {*schema.TOP_KEYS, *schema.DATASET_KEYS, *schema.BOUNDARY_KEYS, *schema.PERTURBATION_KEYS, *schema.COMPOSITE_KEYS}
     | {option for kind in KINDS for option in DATASETS.get(kind).option_names()}
     | {param for kind in MODULES for param in module_class(kind).parameters()}
 )

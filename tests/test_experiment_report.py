@@ -19,6 +19,7 @@ import yaml
 from browser import find_picture, needs_chromium, screenshot
 
 from pytest_sal.cli.main import main
+from pytest_sal.experiment.boundary_summary import read_boundary_summary
 from pytest_sal.experiment.config import build_sequence, load_config
 from pytest_sal.report.experiment_page import THUMBNAIL_WIDTH, write_experiment_report
 from sal_adapters import SalError
@@ -99,12 +100,15 @@ def test_page_shows_every_part_with_the_numbers_of_the_result_files(experiment: 
         for failure in entry["failure_reasons"]:  # a failed run's reason is listed under the table
             assert f"<li>{name}, run {failure['run']}: {failure['reason']}</li>" in text
     assert summary["baseline"]["failures"] == 0 and summary["perturbations"]["fog"]["failures"] == 1  # 25 m fog defeats the VO
-    boundary = json.loads((experiment / "robustness_boundary" / "reference_vo" / "fog_visibility" / "boundary_summary.json").read_text())
-    assert f"fog.visibility_m {boundary['boundary_text']}" in text
-    assert f"a linear sweep at the tolerance step: {boundary['linear_sweep_trials']}" in text
-    assert text.count("<tr class='passed'><td class=num>") + text.count("<tr class='failed'><td class=num>") == len(boundary["trials"])
-    missing = [t for t in boundary["trials"] if t["metrics"]["failures"]]  # the 5 m fog: nothing tracked
-    assert missing and all(f"({t['metrics']['failures'][0]})</td>" in text for t in missing)  # why its ATE is missing
+    search = read_boundary_summary(
+        json.loads((experiment / "robustness_boundary" / "reference_vo" / "fog_visibility" / "boundary_summary.json").read_text())
+    )
+    assert f"fog.visibility_m {search.outcome.boundary.text()}" in text
+    assert f"a linear sweep at the tolerance step: {search.experiment['linear_sweep_trials']}" in text
+    trials = search.outcome.trials
+    assert text.count("<tr class='passed'><td class=num>") + text.count("<tr class='failed'><td class=num>") == len(trials)
+    missing = [t for t in trials if t.metrics["failures"]]  # the 5 m fog: nothing tracked
+    assert missing and all(f"({t.metrics['failures'][0]})</td>" in text for t in missing)  # why its ATE is missing
     features = json.loads((experiment / "features" / "orb" / "summary.json").read_text())
     for name in SEQUENCES:
         assert f"<td>{name}</td><td class=num>{features['sequences'][name]['detections_per_frame']['mean']:.0f}</td>" in text

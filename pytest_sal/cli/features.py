@@ -1,14 +1,16 @@
 """``sal features CONFIG --features orb[,superpoint]``: feature-tracking diagnostics on the
-clean sequence and on each perturbation of an experiment config."""
+clean sequence and on each perturbation of an experiment config (``pytest_sal.experiment.features``),
+with detections, matches and track length per sequence printed."""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
-from sal_adapters.atomic import Replacement
+from pytest_sal.experiment.config import load_config
+from pytest_sal.experiment.features import track_features
 
-__all__ = ["add_features_commands", "run_features"]
+__all__ = ["add_features_commands"]
 
 EPILOG = """\
 examples:
@@ -39,23 +41,11 @@ def add_features_commands(commands: argparse._SubParsersAction) -> None:
     cmd.set_defaults(run=_run)
 
 
-def run_features(
-    config_path: Path, features: str, *, model: Path | None = None, max_keypoints: int = 1000, max_frames: int | None = None
-) -> dict:
-    """Validate the config, build the extractors (a missing model is an error before any work),
-    then track every feature type through the clean and every perturbed sequence."""
-    from pytest_sal.analysis.feature_tracking import compare_features, parse_features
-    from pytest_sal.experiment.config import build_sequence, load_config, perturbed_sequences
-
-    config = load_config(config_path)
-    extractors = parse_features(features, model=model, max_keypoints=max_keypoints)
-    sequences = perturbed_sequences(config, build_sequence(config))
-    out_dir = config.output_dir() / "features"
-    with Replacement() as outputs:  # each feature type's folder is replaced whole, the others stay
-        staging = outputs.entries(out_dir)
-        results = compare_features(sequences, extractors, staging, max_frames=max_frames, progress=True)
-        for result in results.values():
-            result.update({key: outputs.final(result[key]) for key in ("summary", "track_survival", "detections")})
+def _run(args: argparse.Namespace) -> int:
+    config = load_config(args.config)
+    results = track_features(
+        config, args.features, model=args.superpoint_model, max_keypoints=args.max_keypoints, max_frames=args.max_frames
+    )
     for feature, result in results.items():
         print(f"{feature}:")
         for name, stats in result["stats"].items():
@@ -64,9 +54,4 @@ def run_features(
                 f"{stats.matches.mean() if len(stats.matches) else 0.0:7.1f}  mean track {stats.mean_track_length:5.2f} frames"
             )
         print(f"  wrote {result['summary']}, {result['track_survival']}")
-    return results
-
-
-def _run(args: argparse.Namespace) -> int:
-    run_features(args.config, args.features, model=args.superpoint_model, max_keypoints=args.max_keypoints, max_frames=args.max_frames)
     return 0

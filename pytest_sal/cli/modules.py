@@ -186,7 +186,7 @@ def _run_preview(args: argparse.Namespace) -> int:
     originals = [frame.image] + ([frame.right] if frame.right is not None else [])
     if index in kept:
         out = perturbed[kept[index]]
-        results: list[np.ndarray | None] = [out.image] + ([out.right] if out.right is not None else [])
+        results: list[np.ndarray | None] = [out.image, *([out.right] if out.right is not None else [])]
     else:
         results = [None] * len(originals)
     elapsed = time.perf_counter() - started

@@ -21,6 +21,7 @@ session runs it again; its run says why under ``not_cached``.
 
 from __future__ import annotations
 
+import functools
 import math
 import numbers
 import signal
@@ -35,7 +36,7 @@ import numpy as np
 
 from pytest_sal.analysis.kitti_metrics import KITTI_SEGMENTS_M
 from pytest_sal.analysis.metrics import evaluate
-from pytest_sal.engine.outcome import TRIAL_METRICS, Trial
+from pytest_sal.engine.outcome import TRIAL_METRICS, Trial, TrialMetrics
 from pytest_sal.engine.requirements import Requirement
 from pytest_sal.store.cache_keys import cache_key
 from pytest_sal.store.trial_cache import ContentCache
@@ -271,7 +272,7 @@ class TrialRunner:
                 data, cached = self._run(trial.value, key, number), False
             else:
                 data, cached = self.cache.compute(
-                    key, lambda key=key, number=number: self._run(trial.value, key, number), check=run_record_problem, transient=_not_cached
+                    key, functools.partial(self._run, trial.value, key, number), check=run_record_problem, transient=_not_cached
                 )
             passed = self.requirement.holds(data["metrics"])
             # a run the machine starved is no evidence that the system failed: it gets no vote
@@ -283,7 +284,7 @@ class TrialRunner:
             added = True
         if not added:
             return
-        trial.metrics = aggregate_metrics(trial.runs)
+        trial.metrics = TrialMetrics(aggregate_metrics(trial.runs))
         trial.passed = trial.passes > trial.fails
         trial.cached = all(r["cached"] for r in trial.runs)
         trial.failed = [str(c) for c in self.requirement.failed(trial.metrics)]
@@ -343,9 +344,10 @@ def cached_sequence(sequence: Sequence, cache: ContentCache, *, progress: bool =
     ``progress`` shows a bar while it is written."""
     from sal_adapters import DATASETS, open_dataset, write_sequence
 
-    folder, _ = cache.compute_dir(
-        cache_key(frames=sequence.fingerprint), lambda target: write_sequence(sequence, target, progress=progress)
-    )
+    def fill(target: Path) -> None:
+        write_sequence(sequence, target, progress=progress)
+
+    folder, _ = cache.compute_dir(cache_key(frames=sequence.fingerprint), fill)
     options = {"stereo": True} if sequence.sensor == "stereo" and "stereo" in DATASETS.get(sequence.kind).option_names() else {}
     reopened = open_dataset(sequence.kind, folder, **options)
     return reopened.replace(name=sequence.name, meta=dict(reopened.meta, perturbation=sequence.meta.get("perturbation")))
@@ -363,7 +365,7 @@ def _same(a: np.ndarray | None, b: np.ndarray | None) -> bool:
     if a.shape != b.shape:
         return False
     change = cv2.absdiff(a, b)
-    return int(change.max(initial=0)) <= 1 and np.count_nonzero(change) < 0.01 * change.size
+    return int(change.max(initial=0)) <= 1 and bool(np.count_nonzero(change) < 0.01 * change.size)
 
 
 def _example_frame(sequence: Sequence, path: Path, width: int = 480) -> Path:

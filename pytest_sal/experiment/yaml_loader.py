@@ -185,7 +185,7 @@ def read_yaml(text: str, source: str = "<config>") -> Any:
         ) from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
-        line = f":{mark.line + 1}" if mark is not None else ""
+        at_line = f":{mark.line + 1}" if mark is not None else ""
         problem = getattr(exc, "problem", None) or str(exc)
-        raise ConfigError(f"{source}{line}", "", f"YAML syntax error: {one_line(problem)}") from None
+        raise ConfigError(f"{source}{at_line}", "", f"YAML syntax error: {one_line(problem)}") from None
     return data

@@ -26,7 +26,9 @@ from typing import Any
 
 import numpy as np
 
+from pytest_sal.engine.outcome import Trial
 from pytest_sal.engine.requirements import METRICS
+from pytest_sal.experiment.boundary_summary import read_boundary_summary
 from pytest_sal.report.html import REPORT_CSS, asset_src, esc, html_page, page_folder
 from sal_adapters import SalError, Sequence, open_dataset
 from sal_adapters.atomic import copy_file
@@ -341,42 +343,48 @@ def _boundary_section(page: _Page) -> str:
     if summaries is None:
         return f"<section>{heading}<p class='dim'>no boundary search: run <code>sal boundary CONFIG --slam NAME</code></p></section>"
     parts = [heading]
-    for path, s in summaries:
-        unit = s.get("unit") or ""
+    for path, data in summaries:
+        try:
+            summary = read_boundary_summary(data)
+        except ValueError as exc:
+            page.problem(f"{page.rel(path)}: {exc}; its part of the report is left out")
+            continue
+        outcome, experiment = summary.outcome, summary.experiment
+        unit = outcome.boundary.unit
         system, name = path.parent.parent.name, path.parent.name
-        verdict = "passed" if s.get("edge_verdict") == "passed" else "failed"
+        verdict = "passed" if outcome.verdict == "passed" else "failed"
         facts = [
-            ("requirement", f"<code>{esc(s.get('requirement', '?'))}</code>"),
+            ("requirement", f"<code>{esc(outcome.requirement)}</code>"),
             (
                 "boundary",
-                f"{esc(s.get('parameter', '?'))} {esc(s.get('boundary_text', '?'))} <span class='dim'>({esc(s.get('termination', '?'))})</span>",
+                f"{esc(outcome.parameter)} {esc(outcome.boundary.text())} <span class='dim'>({esc(outcome.termination)})</span>",
             ),
-            ("pass / fail value", f"{esc(_value(s.get('pass_value')))} / {esc(_value(s.get('fail_value')))} {esc(unit)}"),
+            ("pass / fail value", f"{esc(_value(outcome.boundary.pass_value))} / {esc(_value(outcome.boundary.fail_value))} {esc(unit)}"),
             (
                 "trials",
-                f"{esc(s.get('trials_used', len(s.get('trials') or [])))} (a linear sweep at the tolerance step: {esc(s.get('linear_sweep_trials', '?'))})",
+                f"{esc(len(outcome.trials))} (a linear sweep at the tolerance step: {esc(experiment['linear_sweep_trials'] or '?')})",
             ),
-            ("dataset", esc(s.get("dataset", "?"))),
+            ("dataset", esc(outcome.dataset)),
         ]
         parts.append(f"<h3><span class='badge {verdict}'>{verdict}</span> {esc(name)} <span class='dim'>({esc(system)})</span></h3>")
         parts.append("<dl>" + "".join(f"<dt>{esc(k)}</dt><dd>{v}</dd>" for k, v in facts) + "</dl>")
         parts.append(
-            page.picture(path.parent / "boundary_plot.png", f"boundary/{system}/{name}.png", f"{s.get('parameter')} against the metrics")
+            page.picture(path.parent / "boundary_plot.png", f"boundary/{system}/{name}.png", f"{outcome.parameter} against the metrics")
         )
-        parts.append(_trials_table(s.get("trials") or [], unit))
+        parts.append(_trials_table(outcome.trials, unit))
     return "<section>" + "\n".join(parts) + "</section>"
 
 
-def _trials_table(trials: list[Any], unit: str) -> str:
+def _trials_table(trials: list[Trial], unit: str) -> str:
     rows = []
-    for i, t in enumerate(t for t in trials if isinstance(t, dict)):
-        m = t.get("metrics") or {}
-        notes = [x for x, on in (("cached", t.get("cached")), (t.get("votes"), t.get("votes"))) if on]
-        failed = "; ".join(t.get("failed") or []) + "".join(f" ({why})" for why in m.get("failures") or [])  # why a metric is missing
+    for i, t in enumerate(trials):
+        m = t.metrics
+        notes = (["cached"] if t.cached else []) + [t.votes()]
+        failed = "; ".join(t.failed) + "".join(f" ({why})" for why in m.get("failures") or [])  # why a metric is missing
         cells = [
             str(i + 1),
-            _value(t.get("value")),
-            str(t.get("verdict", "?")),
+            _value(t.value),
+            "pass" if t.passed else "fail",
             _fmt(m.get("ate_rmse"), ".4f"),
             _fmt(m.get("tracking_rate"), ".0%"),
             ", ".join(notes),
@@ -384,7 +392,7 @@ def _trials_table(trials: list[Any], unit: str) -> str:
         ]
         numeric = {0, 1, 3, 4}
         rows.append(
-            f"<tr class='{'passed' if t.get('verdict') == 'pass' else 'failed'}'>"
+            f"<tr class='{'passed' if t.passed else 'failed'}'>"
             + "".join(f"<td{' class=num' if j in numeric else ''}>{esc(c)}</td>" for j, c in enumerate(cells))
             + "</tr>"
         )
