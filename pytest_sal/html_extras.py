@@ -41,7 +41,7 @@ def outcome_html(outcome: Any) -> str:
     the boundary's ends (``Trial.artifacts["frame"]``, when the trial made one), as
     ``<img src="data:image/png;base64,...">``."""
     from pytest_sal.analysis.plots import png_bytes
-    from pytest_sal.report.formatting import with_unit
+    from pytest_sal.engine.quantity import with_unit
     from pytest_sal.report.html import esc, metric_figure
     from pytest_sal.report.outcome_report import trial_verdict
 

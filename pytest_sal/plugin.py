@@ -15,6 +15,7 @@ from typing import Any
 
 import pytest
 
+from pytest_sal.engine.quantity import num, with_unit
 from pytest_sal.session import SAL_SESSION, SalSession, add_options, outcome_of
 
 __all__ = [
@@ -277,10 +278,10 @@ def pytest_report_teststatus(report: pytest.TestReport, config: pytest.Config) -
         return None
     if outcome.termination == "single":
         trial = outcome.trials[0]
-        unit = f" {outcome.boundary.unit}" if outcome.boundary.unit else ""
         names = dict.fromkeys(name for name, _, _ in outcome.criteria)
-        shown = ", ".join(f"{name} {trial.metrics[name]:.3g}" for name in names if trial.metrics.get(name) is not None)
-        return "passed", ".", (f"PASSED ({outcome.parameter} = {trial.value:g}{unit}: {shown})", {"green": True})
+        shown = ", ".join(f"{name} {num(trial.metrics[name], 3)}" for name in names if trial.metrics.get(name) is not None)
+        value = with_unit(trial.value, outcome.boundary.unit, digits=6)
+        return "passed", ".", (f"PASSED ({outcome.parameter} = {value}: {shown})", {"green": True})
     return "passed", ".", (f"PASSED ({outcome.parameter} boundary {outcome.boundary.text()})", {"green": True})
 
 

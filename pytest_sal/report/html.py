@@ -25,8 +25,9 @@ from matplotlib.transforms import blended_transform_factory
 
 from pytest_sal.analysis.plots import DPI, FIGSIZE, save_png
 from pytest_sal.engine.outcome import Outcome, Trial, failures_first
+from pytest_sal.engine.quantity import num, with_unit
 from pytest_sal.engine.requirements import METRICS
-from pytest_sal.report.formatting import metric_text, num, short_id, signed, truncate_left, with_unit
+from pytest_sal.report.formatting import metric_text, metrics_text, short_id, signed, truncate_left
 from pytest_sal.report.outcome_report import (
     boundary_cell,
     change_cell,
@@ -266,7 +267,7 @@ def _section(o: Outcome, slug: str, directory: Path) -> str:
         facts.append(("regression", f"<span class='bad'>{esc(o.regression)}</span>"))
     for label, trial in zip(("last pass", "first fail"), o.end_trials()):
         if trial is not None:
-            metrics = ", ".join(f"{n} {metric_text(n, trial.metrics.get(n))}" for n in trial_metric_names(o.criteria))
+            metrics = metrics_text(trial.metrics, trial_metric_names(o.criteria))
             facts.append((label, f"{esc(with_unit(trial.value, unit))}: {esc(metrics)}"))
     if o.reproduction:
         facts.append(("reproduce", f"<code>{esc(o.reproduction)}</code>"))

@@ -21,8 +21,9 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 from pytest_sal.engine.outcome import Boundary, Outcome, Trial, failures_first
+from pytest_sal.engine.quantity import num, with_unit
 from pytest_sal.history.gate import NOT_COMPARED
-from pytest_sal.report.formatting import metric_text, num, short_id, signed, truncate_left, truncate_right, with_unit
+from pytest_sal.report.formatting import metric_text, metrics_text, short_id, signed, truncate_left, truncate_right
 from sal_adapters.textfiles import atomic_write_text
 
 __all__ = [
@@ -89,17 +90,9 @@ def envelope_text(outcome: Outcome) -> str:
 
 
 def boundary_cell(outcome: Outcome) -> str:
-    """Compact boundary: ``14-16 m``, ``< 1 m (never failed)``, ``> 1e+05 m (never passed)``;
-    ``passed at 3 px`` for a single point."""
-    b, unit = outcome.boundary, outcome.boundary.unit
-    if (b.pass_value is None) == (b.fail_value is None):
-        return b.text()
-    if outcome.termination == "single":  # one level of a sweep, or an explicit point
-        return f"passed at {with_unit(b.pass_value, unit)}" if b.pass_value is not None else f"failed at {with_unit(b.fail_value, unit)}"
-    severe_below = outcome.worse == "lower"  # the severe side is below the passing values
-    if b.pass_value is not None:
-        return f"{'<' if severe_below else '>'} {with_unit(b.pass_value, unit)} (never failed)"
-    return f"{'>' if severe_below else '<'} {with_unit(b.fail_value, unit)} (never passed)"
+    """The boundary for a table cell (``Boundary.short_text``): ``14-16 m``, ``< 1 m (never
+    failed)``; ``passed at 3 px`` for a single point."""
+    return outcome.boundary.short_text(outcome.worse, single=outcome.termination == "single")
 
 
 def boundary_shift(outcome: Outcome) -> float | None:
@@ -344,7 +337,7 @@ def trial_verdict(t: Trial) -> str:
 
 
 def _metrics_summary(o: Outcome, t: Trial) -> str:
-    text = ", ".join(f"{n} {metric_text(n, t.metrics.get(n))}" for n in trial_metric_names(o.criteria))
+    text = metrics_text(t.metrics, trial_metric_names(o.criteria))
     return text + (f" (failed: {'; '.join(t.failed)})" if t.failed else "")
 
 
