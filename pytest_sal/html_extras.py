@@ -5,7 +5,7 @@ report alike).
 
 Registered by the plugin's ``pytest_configure`` only when pytest-html is installed (plugin
 ``html``); matplotlib is imported when the first robustness test reports, never before. The
-plot and the frames are the ones pytest-sal's own HTML report shows (``report_html``).
+plot and the frames are the ones pytest-sal's own HTML report shows (``pytest_sal.report.outcome_page``).
 """
 
 from __future__ import annotations
@@ -42,7 +42,8 @@ def outcome_html(outcome: Any) -> str:
     ``<img src="data:image/png;base64,...">``."""
     from pytest_sal.analysis.plots import png_bytes
     from pytest_sal.engine.quantity import with_unit
-    from pytest_sal.report.html import esc, metric_figure
+    from pytest_sal.report.html_page import esc
+    from pytest_sal.report.metric_plot import metric_figure
     from pytest_sal.report.outcome_report import trial_verdict
 
     parts = [

@@ -12,16 +12,10 @@ from browser import find_picture, needs_chromium, screenshot
 
 from pytest_sal.engine.outcome import Boundary, Outcome, Trial, TrialMetrics
 from pytest_sal.report.formatting import short_id
-from pytest_sal.report.html import esc, metric_figure
-from pytest_sal.report.outcome_report import (
-    headline,
-    markdown_report,
-    metric_plot,
-    summary_rows,
-    terminal_table,
-    write_html_report,
-    write_markdown,
-)
+from pytest_sal.report.html_page import esc
+from pytest_sal.report.metric_plot import metric_figure, metric_plot
+from pytest_sal.report.outcome_page import write_html_report
+from pytest_sal.report.outcome_report import headline, markdown_report, summary_rows, terminal_table, write_markdown
 
 FOG_REQ = "ate_rmse < 1.5 m and tracking_rate >= 0.9 wherever fog.visibility_m >= 25 m"
 XSS_ID = "tests/robustness/test_weather.py::test_rain[<script>alert(1)</script>]"

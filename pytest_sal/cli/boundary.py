@@ -138,7 +138,7 @@ def run_boundary(
         build_sequence,
         load_config,
     )
-    from pytest_sal.report.html import metric_plot
+    from pytest_sal.report.metric_plot import metric_plot
     from pytest_sal.store.trial_cache import command_cache
 
     out = out or sys.stdout

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from pytest_sal.engine.requirements import METRICS
-from pytest_sal.report.html import REPORT_CSS, asset_src, esc, html_page, page_folder
+from pytest_sal.report.html_page import REPORT_CSS, asset_src, esc, html_page, page_folder
 from sal_adapters import SalError, Sequence, open_dataset
 from sal_adapters.atomic import copy_file
 from sal_adapters.datasets import WRITTEN_MARKER
