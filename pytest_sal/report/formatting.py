@@ -1,6 +1,7 @@
 """The reports' and the live progress's one formatter of metrics, changes, values read from
 files and trial lines: ``signed`` changes, ``metric_text`` (a metric with its unit),
-``metrics_text`` (several), ``short_id`` (a node id without folders), ``truncate_left`` / ``truncate_right`` and
+``metrics_text`` (several), ``number_text`` and ``plain_text`` (values of a summary file),
+``short_id`` (a node id without folders), ``truncate_left`` / ``truncate_right`` and
 ``trial_line`` (one trial as text).
 
 A number with its unit (``num``, ``with_unit``) and the boundary interval (``Boundary.text``,
@@ -15,13 +16,15 @@ from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 from pytest_sal.engine.outcome import Trial
-from pytest_sal.engine.quantity import with_unit
+from pytest_sal.engine.quantity import num, with_unit
 from pytest_sal.engine.requirements import METRICS
 
 __all__ = [
     "ELLIPSIS",
     "metric_text",
     "metrics_text",
+    "number_text",
+    "plain_text",
     "short_id",
     "signed",
     "trial_line",
@@ -68,6 +71,24 @@ def metric_text(name: str, value: Any) -> str:
 def metrics_text(metrics: Mapping[str, Any], names: Iterable[str]) -> str:
     """The ``names`` metrics of ``metrics`` with their units: ``ate_rmse 0.21 m, tracking_rate 0.99``."""
     return ", ".join(f"{name} {metric_text(name, metrics.get(name))}" for name in names)
+
+
+def number_text(value: Any, spec: str) -> str:
+    """``value`` in the format ``spec`` (``.4f``, ``.1%``), or ``-`` when it is not a finite
+    number (missing or null in a summary file)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        return "-"
+    return format(value, spec)
+
+
+def plain_text(value: Any) -> str:
+    """A value read from a summary file: a float to 4 significant digits, a list of them in
+    brackets (``[0.5, 2]``), ``-`` for null, anything else as it is."""
+    if isinstance(value, float):
+        return num(value)
+    if isinstance(value, list):
+        return "[" + ", ".join(plain_text(v) for v in value) + "]"
+    return "-" if value is None else str(value)
 
 
 def trial_line(trial: Trial, parameter: str, unit: str, metrics: Sequence[str]) -> str:
