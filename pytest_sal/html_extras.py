@@ -5,7 +5,7 @@ report alike).
 
 Registered by the plugin's ``pytest_configure`` only when pytest-html is installed (plugin
 ``html``); matplotlib is imported when the first robustness test reports, never before. The
-plot and the frames are the ones pytest-sal's own HTML report shows (``report_html``).
+plot and the frames are the ones pytest-sal's own HTML report shows (``pytest_sal.report.outcome_page``).
 """
 
 from __future__ import annotations
@@ -16,19 +16,26 @@ from typing import Any
 
 import pytest
 
+from pytest_sal.engine.outcome import Outcome
+from pytest_sal.engine.quantity import with_unit
+from pytest_sal.report.html_page import esc
+from pytest_sal.report.outcome_report import trial_verdict
+
 __all__ = ["HtmlExtras", "outcome_html"]
 
 
 class HtmlExtras:
     """The plugin object (``sal-html``): adds an HTML extra to the call report of every test
-    that ran a search (``plugin.OUTCOME`` on its item)."""
+    that ran a search (its ``Outcome`` stashed under ``outcome_key`` on the item, by the
+    plugin that registers this object)."""
+
+    def __init__(self, outcome_key: pytest.StashKey[Outcome]) -> None:
+        self.outcome_key = outcome_key
 
     @pytest.hookimpl(wrapper=True, optionalhook=True)
     def pytest_runtest_makereport(self, item: pytest.Item, call: pytest.CallInfo[None]) -> Any:
-        from pytest_sal.plugin import OUTCOME
-
         report = yield
-        outcome = item.stash.get(OUTCOME, None)
+        outcome = item.stash.get(self.outcome_key, None)
         if outcome is not None and report.when == "call":
             from pytest_html import extras
 
@@ -36,14 +43,12 @@ class HtmlExtras:
         return report
 
 
-def outcome_html(outcome: Any) -> str:
+def outcome_html(outcome: Outcome) -> str:
     """``<div class="sal">``: the boundary and requirement, the metric plot and the frames at
     the boundary's ends (``Trial.artifacts["frame"]``, when the trial made one), as
     ``<img src="data:image/png;base64,...">``."""
-    from pytest_sal.analysis.plots import png_bytes
-    from pytest_sal.report.formatting import with_unit
-    from pytest_sal.report.html import esc, metric_figure
-    from pytest_sal.report.outcome_report import trial_verdict
+    from pytest_sal.analysis.plots import png_bytes  # matplotlib, when the first row is made
+    from pytest_sal.report.metric_plot import metric_figure
 
     parts = [
         f"<p><b>{esc(outcome.parameter)}</b> boundary {esc(outcome.boundary.text())} ({esc(outcome.termination)}); {esc(outcome.requirement)}</p>"

@@ -15,7 +15,14 @@ from typing import Any
 
 import pytest
 
+from pytest_sal.engine.outcome import Outcome
+from pytest_sal.engine.quantity import num, with_unit
+from pytest_sal.engine.requirement_runner import failure_message
+from pytest_sal.engine.requirements import InvalidRequirement
+from pytest_sal.html_extras import HtmlExtras
 from pytest_sal.options import add_options
+from pytest_sal.report.formatting import trial_line
+from pytest_sal.report.outcome_report import trial_metric_names
 from pytest_sal.session import SAL_SESSION, SalSession
 from pytest_sal.session_results import outcome_of
 
@@ -42,7 +49,7 @@ __all__ = [
 ]
 
 #: The outcome of a test, on its item.
-OUTCOME = pytest.StashKey[Any]()
+OUTCOME = pytest.StashKey[Outcome]()
 #: Why a robustness test's marks are misused (xdist workers report it at setup).
 MISUSE = pytest.StashKey[str]()
 
@@ -64,9 +71,7 @@ def pytest_configure(config: pytest.Config) -> None:
     config.stash[SAL_SESSION] = session
     config.pluginmanager.register(session, "sal-session")  # collects outcomes from reports
     if config.pluginmanager.hasplugin("html") and getattr(config.option, "htmlpath", None):
-        from pytest_sal.html_extras import HtmlExtras  # light: matplotlib loads when a row is made
-
-        config.pluginmanager.register(HtmlExtras(), "sal-html")  # pytest-html rows get boundary, plot, frames
+        config.pluginmanager.register(HtmlExtras(OUTCOME), "sal-html")  # pytest-html rows get boundary, plot, frames
 
 
 def pytest_report_header(config: pytest.Config) -> list[str]:
@@ -109,8 +114,6 @@ def level_id(ref: Any, name: str, value: float) -> str:
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Check every robustness test's marks before anything runs."""
-    from pytest_sal.engine.requirements import InvalidRequirement
-
     for item in items:
         function = getattr(item, "function", None)
         if function is None:
@@ -241,8 +244,6 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> None:
         pyfuncitem.stash[OUTCOME] = outcome
         pyfuncitem.funcargs[name] = outcome if name == "sal_outcome" else outcome.trials[0]
         if not outcome.passed:
-            from pytest_sal.engine.requirement_runner import failure_message
-
             __tracebackhide__ = True
             pytest.fail(failure_message(outcome), pytrace=False)
 
@@ -279,10 +280,10 @@ def pytest_report_teststatus(report: pytest.TestReport, config: pytest.Config) -
         return None
     if outcome.termination == "single":
         trial = outcome.trials[0]
-        unit = f" {outcome.boundary.unit}" if outcome.boundary.unit else ""
         names = dict.fromkeys(name for name, _, _ in outcome.criteria)
-        shown = ", ".join(f"{name} {trial.metrics[name]:.3g}" for name in names if trial.metrics.get(name) is not None)
-        return "passed", ".", (f"PASSED ({outcome.parameter} = {trial.value:g}{unit}: {shown})", {"green": True})
+        shown = ", ".join(f"{name} {num(trial.metrics[name], 3)}" for name in names if trial.metrics.get(name) is not None)
+        value = with_unit(trial.value, outcome.boundary.unit, digits=6)
+        return "passed", ".", (f"PASSED ({outcome.parameter} = {value}: {shown})", {"green": True})
     return "passed", ".", (f"PASSED ({outcome.parameter} boundary {outcome.boundary.text()})", {"green": True})
 
 
@@ -299,11 +300,8 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     session.config.stash[SAL_SESSION].finish()
 
 
-def _trace(outcome: Any) -> str:
+def _trace(outcome: Outcome) -> str:
     """The report section of a robustness test: requirement, boundary, votes, a line per trial."""
-    from pytest_sal.report.formatting import trial_line
-    from pytest_sal.report.outcome_report import trial_metric_names
-
     lines = [f"{outcome.requirement}; boundary {outcome.boundary.text()} ({outcome.termination})"]
     lines.append(f"  confidence: {outcome.confidence()} ({len(outcome.trials)} trials, {outcome.runs} runs)")
     names = trial_metric_names(outcome.criteria)

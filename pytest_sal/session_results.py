@@ -93,7 +93,8 @@ class SessionResults:
         machine = dict(machine_info(), load_avg_start=self.load_at_start)
         for outcome in self.outcomes:
             outcome.commit = commit + ("+dirty" if dirty else "")
-        from pytest_sal.report.outcome_report import write_html_report, write_markdown
+        from pytest_sal.report.outcome_page import write_html_report
+        from pytest_sal.report.outcome_report import write_markdown
         from sal_adapters.atomic import writing
         from sal_adapters.errors import WriteError
 

@@ -21,7 +21,8 @@ from browser import find_picture, needs_chromium, screenshot
 from pytest_sal.cli.main import main
 from pytest_sal.experiment.boundary_summary import read_boundary_summary
 from pytest_sal.experiment.config import build_sequence, load_config
-from pytest_sal.report.experiment_page import THUMBNAIL_WIDTH, write_experiment_report
+from pytest_sal.report.experiment_frames import THUMBNAIL_WIDTH
+from pytest_sal.report.experiment_page import write_experiment_report
 from sal_adapters import SalError
 from sal_adapters.images import read_image
 
@@ -89,11 +90,15 @@ def test_page_shows_every_part_with_the_numbers_of_the_result_files(experiment: 
     for heading in ("Example frames", "SLAM results", "Robustness boundary", "Feature tracking"):
         assert f"<h2>{heading}</h2>" in text
     summary = json.loads((experiment / "slam_results" / "reference_vo" / "metrics" / "summary.json").read_text())
-    table = re.search(r"<table class='slam'>.*?</table>", text, re.DOTALL).group(0)
+    found = re.search(r"<table class='slam'>.*?</table>", text, re.DOTALL)
+    assert found is not None
+    table = found.group(0)
     assert "<th class='num'>KITTI t_rel [%] median</th><th class='num'>KITTI r_rel [deg/100m] median</th>" in table
     for name in SEQUENCES:
         entry = summary["baseline"] if name == "baseline" else summary["perturbations"][name]
-        row = re.search(rf"<tr[^>]*><td>{name}</td>(.*?)</tr>", table).group(1)
+        found = re.search(rf"<tr[^>]*><td>{name}</td>(.*?)</tr>", table)
+        assert found is not None, name
+        row = found.group(1)
         median = entry["ate_rmse"]["median"]
         ok = entry["runs"] - entry["failures"]
         assert f"<td class='num'>{ok}/{entry['runs']}</td><td class='num'>{'-' if median is None else format(median, '.4f')}</td>" in row

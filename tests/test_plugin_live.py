@@ -17,7 +17,7 @@ import re
 import pytest
 from plugin_suites import HEADER, SMALL_DATASET, outcomes, output, run
 
-from pytest_sal.engine.outcome import Trial
+from pytest_sal.engine.outcome import Trial, TrialMetrics
 from pytest_sal.report.formatting import trial_line
 
 CONFTEST = '''
@@ -66,7 +66,7 @@ def test_live_fail(sal_outcome):
 
 NAMES = ("test_live", "test_live_fail")
 #: each test's trials (values, verdicts) on the 20-frame world: FakeSlam tracks round(20 v / 40) frames
-TRIALS = {
+TRIALS: dict[str, list[tuple[float, str]]] = {
     "test_live": [(25, "pass"), (1, "FAIL"), (5, "FAIL"), (15, "FAIL"), (20, "pass"), (17.5, "FAIL")],
     "test_live_fail": [(25, "FAIL"), (100000, "pass")],
 }
@@ -152,8 +152,8 @@ def test_nothing_extra_without_verbose_and_cached_trials_say_so(pytester: pytest
 
 def test_trial_line_shows_votes_units_and_missing_metrics() -> None:
     runs = [{"passed": True}, {"passed": False}, {"passed": False}]
-    trial = Trial(value=0.5, passed=False, metrics={"ate_rmse": None, "tracking_rate": 0.25}, runs=runs, wall_time_s=12.34)
+    trial = Trial(value=0.5, passed=False, metrics=TrialMetrics({"ate_rmse": None, "tracking_rate": 0.25}), runs=runs, wall_time_s=12.34)
     line = trial_line(trial, "rain.intensity_mm_h", "mm/h", ["ate_rmse", "tracking_rate"])
     assert line == "rain.intensity_mm_h = 0.5 mm/h: FAIL (2 of 3 runs failed)  ate_rmse -, tracking_rate 0.25  12.3 s"
-    single = Trial(value=3, passed=True, metrics={"ate_rmse": 0.04123}, runs=[{"passed": True}], cached=True)
+    single = Trial(value=3, passed=True, metrics=TrialMetrics({"ate_rmse": 0.04123}), runs=[{"passed": True}], cached=True)
     assert trial_line(single, "jpeg.quality", "", ["ate_rmse"]) == "jpeg.quality = 3: pass  ate_rmse 0.0412 m  0.0 s (cached)"

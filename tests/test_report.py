@@ -10,25 +10,19 @@ import numpy as np
 import pytest
 from browser import find_picture, needs_chromium, screenshot
 
-from pytest_sal.engine.outcome import Boundary, Outcome, Trial
+from pytest_sal.engine.outcome import Boundary, Outcome, Trial, TrialMetrics
 from pytest_sal.report.formatting import short_id
-from pytest_sal.report.html import esc, metric_figure
-from pytest_sal.report.outcome_report import (
-    headline,
-    markdown_report,
-    metric_plot,
-    summary_rows,
-    terminal_table,
-    write_html_report,
-    write_markdown,
-)
+from pytest_sal.report.html_page import esc
+from pytest_sal.report.metric_plot import metric_figure, metric_plot
+from pytest_sal.report.outcome_page import write_html_report
+from pytest_sal.report.outcome_report import headline, markdown_report, summary_rows, terminal_table, write_markdown
 
 FOG_REQ = "ate_rmse < 1.5 m and tracking_rate >= 0.9 wherever fog.visibility_m >= 25 m"
 XSS_ID = "tests/robustness/test_weather.py::test_rain[<script>alert(1)</script>]"
 
 
-def m(ate: float | None, rate: float | None) -> dict[str, float | None]:
-    return {"ate_rmse": ate, "tracking_rate": rate, "rpe_trans": None, "rpe_rot": None, "scale_error": None}
+def m(ate: float | None, rate: float | None) -> TrialMetrics:
+    return TrialMetrics({"ate_rmse": ate, "tracking_rate": rate, "rpe_trans": None, "rpe_rot": None, "scale_error": None})
 
 
 def fog(artifacts_dir: Path | None = None) -> Outcome:
@@ -349,3 +343,40 @@ def test_html_report_renders_in_headless_chromium(outcomes: list[Outcome], tmp_p
         tops.append(top)
     assert tops == sorted(tops) and tops[0] > 200  # below the summary table
     assert (screen[-200:] > 250).all()  # the whole page fitted in the window
+
+
+def test_trial_at_takes_the_last_trial_at_a_value_within_float_rounding() -> None:
+    first, repeat = Trial(14.0, True, m(0.5, 0.95)), Trial(14.0, False, m(1.9, 0.7), runs=[{"passed": False}] * 3)
+    rounded = Trial(0.1 + 0.2, False, m(2.5, 0.5))  # 0.30000000000000004: what a unit conversion leaves
+    edge = Trial(25.0, True, m(0.2, 0.99))
+    o = Outcome(
+        test_id="test_fog.py::test_fog",
+        system="reference_vo",
+        dataset="synthetic",
+        parameter="fog.visibility_m",
+        worse="lower",
+        edge=25.0,
+        requirement=FOG_REQ,
+        verdict="passed",
+        boundary=Boundary(14.0, 0.3, "m"),
+        termination="tolerance",
+        trials=[edge, first, rounded, repeat],
+    )
+    assert o.trial_at(14.0) is repeat  # repeated trials at one value: the last, the latest evidence
+    assert o.trial_at(0.3) is rounded and o.trial_at(0.1 + 0.2) is rounded  # equal within float rounding
+    assert o.trial_at(0.30001) is None and o.trial_at(None) is None
+    assert o.end_trials() == (repeat, rounded)
+    assert o.trial_at(o.edge) is edge
+
+
+def test_boundary_texts_long_and_short() -> None:
+    assert Boundary(14.0, 16.0, "m").text() == "14-16 m" == Boundary(16.0, 14.0, "m").short_text("lower")
+    assert Boundary(-1.25, -3.5, "").text() == "-3.5 to -1.25"
+    assert Boundary(1.0, None, "m").text() == "beyond 1 m (passed everywhere searched)"
+    assert Boundary(None, 1e5, "m").text() == "beyond 1e+05 m (failed everywhere searched)"
+    assert Boundary(None, None, "m").text() == "unknown" == Boundary(None, None, "m").short_text("higher")
+    assert Boundary(1.0, None, "m").short_text("lower") == "< 1 m (never failed)"
+    assert Boundary(1.0, None, "m").short_text("higher") == "> 1 m (never failed)"
+    assert Boundary(None, 12.3456, "px").short_text("lower") == "> 12.35 px (never passed)"
+    assert Boundary(3.0, None, "px").short_text("higher", single=True) == "passed at 3 px"
+    assert Boundary(None, 3.0, "").short_text("higher", single=True) == "failed at 3"

@@ -64,7 +64,7 @@ def add_boundary_commands(commands: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from pytest_sal.report.html import metric_plot
+    from pytest_sal.report.metric_plot import metric_plot
 
     config = load_config(args.config)
     enabled_boundary(config)  # a missing or disabled block fails before the system is made

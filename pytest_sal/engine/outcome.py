@@ -3,6 +3,12 @@
 ``Outcome`` is JSON-ready (``to_dict`` / ``from_dict``): it travels from xdist workers to the
 controller on the test report, goes into the history store, the reports and JUnit XML.
 Values are in the parameter's declared unit (what ``sal modules`` prints: lx, ISO, m, ...).
+
+The boundary interval's text has its one implementation here, ``Boundary.text`` (long, for
+messages) and ``Boundary.short_text`` (for a table cell), on ``pytest_sal.engine.quantity``:
+the engine writes it into a failing test's message, and the reports, the plugin and the
+commands above re-use it. The trials at a value (the bracket's ends, the envelope's edge) are
+looked up by one rule, ``Outcome.trial_at``.
 """
 
 from __future__ import annotations
@@ -12,6 +18,8 @@ from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
 from typing import Any, NoReturn
 
+from pytest_sal.engine.legacy_units import upgrade_outcome
+from pytest_sal.engine.quantity import num, with_unit
 from sal_adapters.suggest import suggestion
 
 __all__ = ["TRIAL_METRICS", "Boundary", "Outcome", "Trial", "TrialMetrics", "failures_first"]
@@ -60,7 +68,7 @@ class TrialMetrics(dict[str, Any]):
             "trial metrics are read-only (the medians of the trial's runs); make a changed copy: TrialMetrics({**metrics, name: value})"
         )
 
-    __setitem__ = __delitem__ = clear = pop = popitem = setdefault = update = __ior__ = _read_only  # type: ignore[assignment]
+    __setitem__ = __delitem__ = clear = pop = popitem = setdefault = update = __ior__ = _read_only
 
 
 @dataclass
@@ -141,16 +149,33 @@ class Boundary:
     unit: str = ""
 
     def text(self) -> str:
-        """``14-16 m``, ``> 1 m (never failed)``, ``< 100000 m (never passed)``."""
-        unit = f" {self.unit}" if self.unit else ""
+        """The interval in words: ``14-16 m`` (``-3.5 to -1.25 m`` when it reaches below 0),
+        ``beyond 1 m (passed everywhere searched)``, ``beyond 1e+05 m (failed everywhere
+        searched)``, ``unknown``."""
         if self.pass_value is not None and self.fail_value is not None:
             lo, hi = sorted((self.pass_value, self.fail_value))
-            return f"{lo:.4g}{'-' if lo >= 0 else ' to '}{hi:.4g}{unit}"
+            return f"{num(lo)}{'-' if lo >= 0 else ' to '}{with_unit(hi, self.unit)}"
         if self.pass_value is not None:
-            return f"beyond {self.pass_value:.4g}{unit} (passed everywhere searched)"
+            return f"beyond {with_unit(self.pass_value, self.unit)} (passed everywhere searched)"
         if self.fail_value is not None:
-            return f"beyond {self.fail_value:.4g}{unit} (failed everywhere searched)"
+            return f"beyond {with_unit(self.fail_value, self.unit)} (failed everywhere searched)"
         return "unknown"
+
+    def short_text(self, worse: str, *, single: bool = False) -> str:
+        """The interval for a table cell: ``14-16 m`` as ``text``; one-sided as a bound on
+        the severe side (``worse``: ``lower`` or ``higher`` values are more severe), ``< 1 m
+        (never failed)`` or ``> 1e+05 m (never passed)``; ``passed at 3 px`` or ``failed at 3
+        px`` when ``single`` (one sweep level or ``sal.at`` point was tried)."""
+        if (self.pass_value is None) == (self.fail_value is None):
+            return self.text()
+        if single:
+            if self.pass_value is not None:
+                return f"passed at {with_unit(self.pass_value, self.unit)}"
+            return f"failed at {with_unit(self.fail_value, self.unit)}"
+        severe_below = worse == "lower"  # the severe side is below the passing values
+        if self.pass_value is not None:
+            return f"{'<' if severe_below else '>'} {with_unit(self.pass_value, self.unit)} (never failed)"
+        return f"{'>' if severe_below else '<'} {with_unit(self.fail_value, self.unit)} (never passed)"
 
 
 @dataclass
@@ -223,13 +248,19 @@ class Outcome:
         """SLAM runs behind the outcome (cached ones included)."""
         return sum(len(t.runs) for t in self.trials)
 
+    def trial_at(self, value: float | None) -> Trial | None:
+        """The trial at ``value`` (``None`` when none was tried there, or ``value`` is
+        ``None``). The rule: equal within float rounding (``math.isclose``, relative 1e-9,
+        absolute 1e-12: a value converted from an older unit or through JSON still finds its
+        trial), and of several trials at that value the last, the latest evidence (the one
+        the search confirmed with more runs)."""
+        if value is None:
+            return None
+        return next((t for t in reversed(self.trials) if math.isclose(t.value, value, rel_tol=1e-9, abs_tol=1e-12)), None)
+
     def end_trials(self) -> tuple[Trial | None, Trial | None]:
-        """The trials at the bracket's pass and fail ends (the last trial at each value)."""
-
-        def at(value: float | None) -> Trial | None:
-            return next((t for t in reversed(self.trials) if value is not None and t.value == value), None)
-
-        return at(self.boundary.pass_value), at(self.boundary.fail_value)
+        """The trials at the bracket's pass and fail ends (``trial_at`` each end)."""
+        return self.trial_at(self.boundary.pass_value), self.trial_at(self.boundary.fail_value)
 
     def confidence(self) -> str:
         """How sure the result is, from the runs behind the deciding verdicts:
@@ -255,8 +286,6 @@ class Outcome:
     def from_dict(cls, data: dict[str, Any]) -> Outcome:
         """Inverse of ``to_dict``; an outcome stored in an older unit is converted
         (``pytest_sal.engine.legacy_units``)."""
-        from pytest_sal.engine.legacy_units import upgrade_outcome
-
         _check_numbers(data)
         data = upgrade_outcome(dict(data))
         data.pop("confidence", None)

@@ -213,7 +213,7 @@ def _vs_baseline(p: Any, b: Any, result: Any, *, baseline_traj: Trajectory | Non
     the frames this run tracked (the fair comparison when frames were dropped or lost)."""
     import numpy as np
 
-    from pytest_sal.analysis.metrics import MIN_POSES, ate
+    from pytest_sal.analysis.trajectory_errors import MIN_POSES, ate
 
     def ratio(x: float | None, y: float | None) -> float | None:
         return None if x is None or y is None or y == 0 else x / y

@@ -227,13 +227,8 @@ def warm_start(
 
 
 def edge_trial(outcome: Outcome) -> Trial | None:
-    """The first trial at the outcome's edge value, or ``None``."""
-    if outcome.edge is None:
-        return None
-    for trial in outcome.trials:
-        if math.isclose(trial.value, outcome.edge, rel_tol=1e-9, abs_tol=1e-12):
-            return trial
-    return None
+    """The trial at the outcome's edge value (``Outcome.trial_at``), or ``None``."""
+    return outcome.trial_at(outcome.edge)
 
 
 def _comparable(current: Outcome, previous: Outcome) -> bool:

@@ -1,4 +1,7 @@
-"""Reports: the terminal table, the Markdown summary, the HTML report of test outcomes, the HTML
-page of an experiment folder, contact sheets, and the one formatter of numbers and intervals."""
+"""Reports: the terminal table and the Markdown summary of test outcomes (``outcome_report``),
+their HTML report (``outcome_page``) and metric plot (``metric_plot``) on the shared page shell
+(``html_page``), the HTML page of an experiment folder (``experiment_page``, with
+``experiment_folder``, ``experiment_frames`` and ``experiment_results``), contact sheets, and the
+one formatter of metrics and trial lines (``formatting``, on ``pytest_sal.engine.quantity``)."""
 
 __all__: list[str] = []

@@ -1,18 +1,36 @@
-"""The one formatter of numbers, metrics, intervals and trial lines, for every report and the
-live progress: ``num`` (4 significant digits), ``with_unit``, ``signed`` changes, ``metric_text``
-(a metric with its unit), ``short_id`` (a node id without folders) and ``trial_line`` (one
-trial as text)."""
+"""The reports' and the live progress's one formatter of metrics, changes, values read from
+files and trial lines: ``signed`` changes, ``metric_text`` (a metric with its unit),
+``metrics_text`` (several), ``number_text`` and ``plain_text`` (values of a summary file),
+``short_id`` (a node id without folders), ``truncate_left`` / ``truncate_right`` and
+``trial_line`` (one trial as text).
+
+A number with its unit (``num``, ``with_unit``) and the boundary interval (``Boundary.text``,
+``Boundary.short_text``) are written by ``pytest_sal.engine.quantity`` and
+``pytest_sal.engine.outcome``, one layer down, since the engine's failure message needs them
+too; this module builds on them."""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 from pytest_sal.engine.outcome import Trial
+from pytest_sal.engine.quantity import num, with_unit
 from pytest_sal.engine.requirements import METRICS
 
-__all__ = ["ELLIPSIS", "metric_text", "num", "short_id", "signed", "trial_line", "truncate_left", "truncate_right", "with_unit"]
+__all__ = [
+    "ELLIPSIS",
+    "metric_text",
+    "metrics_text",
+    "number_text",
+    "plain_text",
+    "short_id",
+    "signed",
+    "trial_line",
+    "truncate_left",
+    "truncate_right",
+]
 
 ELLIPSIS = "…"
 
@@ -24,19 +42,13 @@ def short_id(test_id: str) -> str:
 
 
 def truncate_left(text: str, width: int) -> str:
+    """``text`` cut to ``width`` characters from the left, marked ``…`` (``…est_fog.py::test``)."""
     return text if len(text) <= width else ELLIPSIS + text[len(text) - width + 1 :] if width > 1 else text[-width:]
 
 
 def truncate_right(text: str, width: int) -> str:
+    """``text`` cut to ``width`` characters from the right, marked ``…``."""
     return text if len(text) <= width else text[: width - 1] + ELLIPSIS if width > 1 else text[:width]
-
-
-def num(value: float | None) -> str:
-    return "-" if value is None else f"{value:.4g}"
-
-
-def with_unit(value: float | None, unit: str) -> str:
-    return "-" if value is None else f"{value:.4g}{' ' + unit if unit else ''}"
 
 
 def signed(value: float | None, unit: str) -> str:
@@ -53,8 +65,30 @@ def metric_text(name: str, value: Any) -> str:
         return "-"
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         return str(value)
-    unit = METRICS[name].unit if name in METRICS else ""
-    return f"{value:.3g}{' ' + unit if unit else ''}"
+    return with_unit(value, METRICS[name].unit if name in METRICS else "", digits=3)
+
+
+def metrics_text(metrics: Mapping[str, Any], names: Iterable[str]) -> str:
+    """The ``names`` metrics of ``metrics`` with their units: ``ate_rmse 0.21 m, tracking_rate 0.99``."""
+    return ", ".join(f"{name} {metric_text(name, metrics.get(name))}" for name in names)
+
+
+def number_text(value: Any, spec: str) -> str:
+    """``value`` in the format ``spec`` (``.4f``, ``.1%``), or ``-`` when it is not a finite
+    number (missing or null in a summary file)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        return "-"
+    return format(value, spec)
+
+
+def plain_text(value: Any) -> str:
+    """A value read from a summary file: a float to 4 significant digits, a list of them in
+    brackets (``[0.5, 2]``), ``-`` for null, anything else as it is."""
+    if isinstance(value, float):
+        return num(value)
+    if isinstance(value, list):
+        return "[" + ", ".join(plain_text(v) for v in value) + "]"
+    return "-" if value is None else str(value)
 
 
 def trial_line(trial: Trial, parameter: str, unit: str, metrics: Sequence[str]) -> str:
@@ -63,7 +97,6 @@ def trial_line(trial: Trial, parameter: str, unit: str, metrics: Sequence[str]) 
     votes when more than one ran), the median ``metrics`` named (with their units), the
     seconds spent on the trial (``Trial.wall_time_s``) and ``(cached)`` when no run was made."""
     votes = f" ({trial.votes()})" if len(trial.runs) > 1 else ""
-    shown = ", ".join(f"{name} {metric_text(name, trial.metrics.get(name))}" for name in metrics)
-    value = f"{trial.value:g}{' ' + unit if unit else ''}"
     cached = " (cached)" if trial.cached else ""
-    return f"{parameter} = {value}: {'pass' if trial.passed else 'FAIL'}{votes}  {shown}  {trial.wall_time_s:.1f} s{cached}"
+    shown = metrics_text(trial.metrics, metrics)
+    return f"{parameter} = {with_unit(trial.value, unit, digits=6)}: {'pass' if trial.passed else 'FAIL'}{votes}  {shown}  {trial.wall_time_s:.1f} s{cached}"

@@ -1,4 +1,5 @@
-"""Reports over robustness outcomes: a terminal table, a Markdown summary for CI, an HTML page.
+"""The text reports over robustness outcomes, a terminal table and a Markdown summary for CI,
+and the pieces of text (a test's status, its cells, its trials as rows) the HTML report shares.
 
 Pure functions over a list of ``Outcome`` (no pytest here):
 
@@ -7,8 +8,9 @@ Pure functions over a list of ``Outcome`` (no pytest here):
 * ``markdown_report`` / ``write_markdown``: headline counts, the table, and details (metrics at
   both ends of the bracket, the trials, contradictions, the reproduction line) for every test
   that failed, was flaky or regressed; GitHub-flavoured, for a CI job summary.
-* ``write_html_report`` / ``metric_plot`` (in ``pytest_sal.report.html``): one self-contained
-  page with a metric-against-parameter plot per test, the trials and the example frames.
+
+The HTML page (``pytest_sal.report.outcome_page``) and the metric plot (``pytest_sal.report.metric_plot``)
+build on the pieces of text here.
 
 Signs: ``margin`` and ``change`` count towards the severe side of the parameter, so ``+`` means
 the system copes with more than the requirement asks (margin) or than it did before (change).
@@ -21,23 +23,25 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 from pytest_sal.engine.outcome import Boundary, Outcome, Trial, failures_first
+from pytest_sal.engine.quantity import num, with_unit
 from pytest_sal.history.gate import NOT_COMPARED
-from pytest_sal.report.formatting import metric_text, num, short_id, signed, truncate_left, truncate_right, with_unit
+from pytest_sal.report.formatting import metric_text, metrics_text, short_id, signed, truncate_left, truncate_right
 from sal_adapters.textfiles import atomic_write_text
 
 __all__ = [
     "COLUMNS",
+    "boundary_cell",
+    "change_cell",
     "envelope_text",
     "headline",
     "markdown_report",
-    "metric_plot",
-    "short_id",
     "status",
     "summary_rows",
     "table_columns",
     "terminal_table",
+    "trial_metric_names",
+    "trial_rows",
     "trial_verdict",
-    "write_html_report",
     "write_markdown",
 ]
 
@@ -89,17 +93,9 @@ def envelope_text(outcome: Outcome) -> str:
 
 
 def boundary_cell(outcome: Outcome) -> str:
-    """Compact boundary: ``14-16 m``, ``< 1 m (never failed)``, ``> 1e+05 m (never passed)``;
-    ``passed at 3 px`` for a single point."""
-    b, unit = outcome.boundary, outcome.boundary.unit
-    if (b.pass_value is None) == (b.fail_value is None):
-        return b.text()
-    if outcome.termination == "single":  # one level of a sweep, or an explicit point
-        return f"passed at {with_unit(b.pass_value, unit)}" if b.pass_value is not None else f"failed at {with_unit(b.fail_value, unit)}"
-    severe_below = outcome.worse == "lower"  # the severe side is below the passing values
-    if b.pass_value is not None:
-        return f"{'<' if severe_below else '>'} {with_unit(b.pass_value, unit)} (never failed)"
-    return f"{'>' if severe_below else '<'} {with_unit(b.fail_value, unit)} (never passed)"
+    """The boundary for a table cell (``Boundary.short_text``): ``14-16 m``, ``< 1 m (never
+    failed)``; ``passed at 3 px`` for a single point."""
+    return outcome.boundary.short_text(outcome.worse, single=outcome.termination == "single")
 
 
 def boundary_shift(outcome: Outcome) -> float | None:
@@ -315,20 +311,8 @@ def _md_details(o: Outcome) -> list[str]:
         if trial is not None:
             lines.append(f"- **{label}** at {md(with_unit(trial.value, unit))}: {md(_metrics_summary(o, trial))}")
     if o.trials:
-        names = trial_metric_names(o.criteria)
-        header = ["#", f"value [{unit}]" if unit else "value", "verdict", *names, "cached", "failed criteria"]
-        rows = [
-            [
-                str(i),
-                num(t.value),
-                trial_verdict(t),
-                *(metric_text(n, t.metrics.get(n)) for n in names),
-                "yes" if t.cached else "",
-                "; ".join(t.failed),
-            ]
-            for i, t in enumerate(o.trials, 1)
-        ]
-        align = ["<", ">", "<", *[">"] * len(names), "<", "<"]
+        header, rows = trial_rows(o, times=False)
+        align = ["<", ">", "<", *[">"] * (len(header) - 5), "<", "<"]  # the metrics' columns right-aligned
         lines += ["", *_md_table([md(h) for h in header], [[md(c) for c in r] for r in rows], align)]
     if o.contradictions:
         lines += ["", "**contradictions** (a pass more severe than a fail):", ""]
@@ -338,35 +322,38 @@ def _md_details(o: Outcome) -> list[str]:
     return lines
 
 
+def trial_rows(o: Outcome, *, times: bool) -> tuple[list[str], list[list[str]]]:
+    """The trials of ``o`` as a table's header and rows of text: #, value (the header with the
+    unit), verdict, the metrics of ``trial_metric_names``, cached, the seconds spent when
+    ``times``, the failed criteria."""
+    names = trial_metric_names(o.criteria)
+    unit = o.boundary.unit
+    header = ["#", f"value [{unit}]" if unit else "value", "verdict", *names, "cached", *(["time"] if times else []), "failed criteria"]
+    rows = [
+        [
+            str(i),
+            num(t.value),
+            trial_verdict(t),
+            *(metric_text(n, t.metrics.get(n)) for n in names),
+            "yes" if t.cached else "",
+            *([f"{t.wall_time_s:.1f} s"] if times else []),
+            "; ".join(t.failed),
+        ]
+        for i, t in enumerate(o.trials, 1)
+    ]
+    return header, rows
+
+
 def trial_verdict(t: Trial) -> str:
     """``pass``, or ``fail (2 of 3 runs failed)`` when more than one run voted."""
     return ("pass" if t.passed else "fail") + (f" ({t.votes()})" if len(t.runs) > 1 else "")
 
 
 def _metrics_summary(o: Outcome, t: Trial) -> str:
-    text = ", ".join(f"{n} {metric_text(n, t.metrics.get(n))}" for n in trial_metric_names(o.criteria))
+    text = metrics_text(t.metrics, trial_metric_names(o.criteria))
     return text + (f" (failed: {'; '.join(t.failed)})" if t.failed else "")
 
 
 def write_markdown(outcomes: Iterable[Outcome], path: str | Path, *, title: str = "Robustness") -> Path:
     """Write ``markdown_report`` to ``path`` atomically; return the path."""
     return atomic_write_text(path, markdown_report(outcomes, title=title))
-
-
-# ---------------------------------------------------------------- HTML (pytest_sal.report.html)
-
-
-def write_html_report(outcomes: Iterable[Outcome], directory: str | Path, *, title: str = "Robustness report") -> Path:
-    """Write the self-contained HTML report (``index.html``, plots and copied frames) into
-    ``directory``; return the path of ``index.html``. See ``pytest_sal.report.html``."""
-    from pytest_sal.report import html as report_html
-
-    return report_html.write_html_report(outcomes, directory, title=title)
-
-
-def metric_plot(outcome: Outcome, path: str | Path) -> Path:
-    """Write the metric-against-parameter plot of ``outcome`` as a PNG; return the path.
-    See ``pytest_sal.report.html.metric_plot``."""
-    from pytest_sal.report import html as report_html
-
-    return report_html.metric_plot(outcome, path)
