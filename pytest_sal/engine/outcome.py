@@ -300,9 +300,11 @@ class Outcome:
 
 def failures_first(outcomes: Iterable[Outcome]) -> list[Outcome]:
     """``outcomes`` with the tests that failed (flaky and regressed ones included: every one
-    not ``passed``) first, then the rest, each group in its given order: what a report lists."""
-    outcomes = list(outcomes)
-    return [o for o in outcomes if not o.passed] + [o for o in outcomes if o.passed]
+    not ``passed``) first, then the rest, each group sorted by test id: what a report lists.
+    Sorted, not in the order given, so that a report reads the same whatever order the
+    ``pytest -n`` workers finished the tests in."""
+    ordered = sorted(outcomes, key=lambda o: (o.test_id, o.system, o.dataset))
+    return [o for o in ordered if not o.passed] + [o for o in ordered if o.passed]
 
 
 def _check_numbers(data: Any) -> None:
