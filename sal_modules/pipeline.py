@@ -19,8 +19,8 @@ import cv2
 import numpy as np
 
 from sal_adapters.sequence import Frame, FrameRecord, Sequence
-from sal_modules.base import STREAMS, ModuleContext, Perturbation, SequencePerturbation
-from sal_modules.chain import Composite
+from sal_modules.base import Composite, Perturbation, SequencePerturbation
+from sal_modules.context import STREAMS, ModuleContext
 from sal_modules.depth import DepthProvider, select_depth_provider
 from sal_modules.errors import ModuleError
 

@@ -36,7 +36,7 @@ __all__ = ["add_experiment_commands", "run_perturb"]
 
 
 def _describe(module: Perturbation | None) -> str:
-    from sal_modules.chain import Composite
+    from sal_modules.base import Composite
 
     if module is None:
         return "clean sequence"
@@ -60,7 +60,7 @@ def _fmt(value: Any) -> str:
 
 
 def _boundary_param(config: ExperimentConfig, rb: BoundaryConfig) -> Param:
-    from sal_modules.chain import Composite
+    from sal_modules.base import Composite
 
     pert = next(p for p in config.perturbations if p.name == rb.target_perturbation)
     module = build_module(pert)
@@ -80,7 +80,7 @@ def run_perturb(config: ExperimentConfig, *, dry_run: bool = False, cache_dir: P
 
     from pytest_sal.store.cache_keys import cache_key
     from pytest_sal.store.trial_cache import command_cache
-    from sal_modules.chain import Composite
+    from sal_modules.base import Composite
 
     out = out or sys.stdout
     with no_cache_writes() if dry_run else nullcontext():  # a dry run renders in memory only

@@ -613,7 +613,7 @@ class _Parser:
                 f"{w}.target_perturbation", f"{quote(target)} is the clean sequence (type none); it has no parameter to search"
             )
         parameter = self.typed(d["parameter"], f"{w}.parameter", "str")
-        from sal_modules.chain import Composite
+        from sal_modules.base import Composite
 
         module = build_module(pert)
         assert module is not None
@@ -701,7 +701,7 @@ def build_sequence(config: ExperimentConfig) -> Sequence:
 
 def build_module(pert: PerturbationConfig) -> Perturbation | None:
     """The module of one perturbation (``None`` for type none)."""
-    from sal_modules.chain import Composite
+    from sal_modules.base import Composite
     from sal_modules.registry import module_class
 
     if pert.type == "none":

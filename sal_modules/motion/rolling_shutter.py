@@ -26,7 +26,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from sal_modules.base import DepthLookup, ModuleContext, Perturbation
+from sal_modules.base import Perturbation
+from sal_modules.context import DepthLookup, ModuleContext
 from sal_modules.depth import NativeDepth
 from sal_modules.errors import ModuleError
 from sal_modules.motion.flow import CleanFrames, reprojection_flow, warp

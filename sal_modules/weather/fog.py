@@ -45,8 +45,9 @@ import cv2
 import numpy as np
 
 from sal_adapters.camera import Camera
-from sal_modules.base import ModuleContext, Perturbation
+from sal_modules.base import Perturbation
 from sal_modules.colour import DECODE_TABLE, encode_table, srgb_decode, srgb_to_linear
+from sal_modules.context import ModuleContext
 from sal_modules.params import Param
 from sal_modules.weather.noise import GradientNoise
 from sal_modules.work_buffers import scratch

@@ -59,7 +59,8 @@ from typing import ClassVar
 import cv2
 import numpy as np
 
-from sal_modules.base import ModuleContext, Perturbation
+from sal_modules.base import Perturbation
+from sal_modules.context import ModuleContext
 from sal_modules.params import Param
 from sal_modules.weather.fog import (
     blend_srgb,
