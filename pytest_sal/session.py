@@ -56,7 +56,7 @@ def _ini_number(config: pytest.Config, name: str) -> Any:
 
 
 def _size(text: str) -> int:
-    from pytest_sal.store.trial_cache import parse_size
+    from pytest_sal.store.byte_sizes import parse_size
 
     try:
         return parse_size(text)
@@ -97,7 +97,7 @@ def _ini_segments(config: pytest.Config) -> tuple[float, ...]:
 
 
 def _ini_size(text: str) -> int:
-    from pytest_sal.store.trial_cache import parse_size
+    from pytest_sal.store.byte_sizes import parse_size
 
     try:
         return parse_size(text)
