@@ -1,6 +1,6 @@
 """``reference_vo``: the built-in, deterministic visual odometry (OpenCV only, in process).
 
-Algorithm (``sal_wrappers.reference_vo.odometry``, geometry in ``vo_geometry``, ``vo_bundle``). A local
+Algorithm (``odometry``; ``lens``, ``features``, ``geometry`` and ``bundle`` beside it). A local
 map of 3-D points with ORB descriptors is tracked frame by frame. ``tracker="orb"``: the
 frame's ORB keypoints are matched to the map points projected with the pose a
 constant-velocity model predicts (Hamming distance, ratio test, one-to-one; all keypoints when
@@ -46,7 +46,7 @@ import numpy as np
 from sal_adapters import Sequence, Trajectory
 from sal_wrappers.base import RunResult, SlamSystem, SlamSystemError, TrackState, file_sha256
 from sal_wrappers.prefetch import prefetched
-from sal_wrappers.reference_vo import geometry as geo
+from sal_wrappers.reference_vo.lens import Lens, make_lens
 from sal_wrappers.reference_vo.odometry import Odometry
 
 __all__ = ["ReferenceVO"]
@@ -133,7 +133,7 @@ class ReferenceVO(SlamSystem):
                 f"# reference_vo {mode} on {sequence.name}: {n} frames, options {self.options()}\n# frame timestamp state inliers ms\n"
             )
             try:
-                lens = geo.make_lens(sequence, mode)
+                lens = make_lens(sequence, mode)
                 size = (sequence.camera.width, sequence.camera.height) if lens.maps is None else lens.maps[0][0].shape[::-1]
                 odometry = Odometry(
                     lens, mode, size, features=self.features, min_inliers=self.min_inliers, tracker=self.tracker, max_lost=self.max_lost
@@ -223,7 +223,7 @@ def _failed(log: Any, exc: Exception, pos: int | None = None) -> str:
 
 
 def _largest_segment(
-    sequence: Sequence, lens: geo.Lens | None, states: np.ndarray, poses: list, segment: np.ndarray
+    sequence: Sequence, lens: Lens | None, states: np.ndarray, poses: list, segment: np.ndarray
 ) -> tuple[Trajectory | None, list[int]]:
     ok = states == TrackState.OK
     sizes = [int(np.count_nonzero(ok & (segment == s))) for s in range(int(segment.max()) + 1)] if len(segment) else []
