@@ -75,7 +75,7 @@ def make_lens(sequence: Sequence, mode: str) -> Lens:
     dist = np.array(camera.distortion, np.float64) if any(camera.distortion) else None
     if mode != "stereo":
         return Lens(camera.K, dist, None, (None, None), 0.0, np.eye(3))
-    from sal_modules.depth.stereo import stereo_rig
+    from sal_modules.depth.stereo_rig import stereo_rig
 
     rig = stereo_rig(camera)
     if rig.rectified:

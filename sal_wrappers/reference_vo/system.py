@@ -13,7 +13,7 @@ below 70 % of those of the first frame after the previous keyframe; it adds the 
 map point explains: RGB-D with the depth at the keypoint (unless the depth jumps within
 3x3 px), stereo with ORB matching along the rectified rows refined to sub-pixel by
 Lucas-Kanade (pairs that are not rectified, EuRoC, are rectified with
-``sal_modules.depth.stereo.stereo_rig``), mono by triangulation against the two previous
+``sal_modules.depth.stereo_rig.stereo_rig``), mono by triangulation against the two previous
 keyframes, followed by a local bundle adjustment of the last six keyframes. Mono starts when
 a frame shows enough parallax against a reference frame: essential matrix, triangulated
 points scaled to a median depth of 1, then the frames in between are tracked against that
