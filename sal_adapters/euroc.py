@@ -159,11 +159,11 @@ class EurocDataset(DatasetKind):
             stamps.append(ns)
             write_image(mav0 / "cam0" / "data" / f"{ns}.png", _sized(frame.image, sequence.camera, sequence, record), grey=grey)
             if stereo:
-                right = _sized(frame.right, sequence.camera.right or sequence.camera, sequence, record)
+                right = _sized(frame.require("right"), sequence.camera.right or sequence.camera, sequence, record)
                 write_image(mav0 / "cam1" / "data" / f"{ns}.png", right, grey=grey)
 
         cameras = [("cam0", sequence.camera, T_BS0)]
-        if stereo:
+        if T_BS1 is not None:  # stereo
             cameras.append(("cam1", sequence.camera.right or sequence.camera, T_BS1))
         for cam_name, camera, T_BS in cameras:
             csv = "".join(f"{ns},{ns}.png\n" for ns in stamps)

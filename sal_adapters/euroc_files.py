@@ -98,7 +98,8 @@ def read_camera_sensor(path: Path) -> CameraSensor:
     if any(v != int(v) for v in resolution):
         raise DatasetError(f"key 'resolution' must be two integers [width, height] (px), got {data['resolution']!r}", path)
     try:
-        camera = Camera(*intrinsics, width=int(resolution[0]), height=int(resolution[1]), distortion=tuple(distortion))
+        fx, fy, cx, cy = intrinsics
+        camera = Camera(fx, fy, cx, cy, width=int(resolution[0]), height=int(resolution[1]), distortion=tuple(distortion))
     except ValueError as exc:
         raise DatasetError(str(exc), path) from None
     return CameraSensor(camera=camera, rate_hz=float(rate), T_BS=T_BS)

@@ -111,7 +111,7 @@ class KittiDataset(DatasetKind):
             stem = f"{position:06d}"
             write_image(seq_dir / left_name / f"{stem}.png", frame.image, grey=not color)
             if stereo:
-                write_image(seq_dir / right_name / f"{stem}.png", frame.right, grey=not color)
+                write_image(seq_dir / right_name / f"{stem}.png", frame.require("right"), grey=not color)
         write_times(seq_dir / "times.txt", sequence.timestamps)
         calib, T_c0_left = _calib_for(sequence, left_key, right_key)
         lines = [f"{key}: " + " ".join(f"{v:.12e}" for v in np.ravel(value)) for key, value in calib.items()]

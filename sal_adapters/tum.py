@@ -160,7 +160,7 @@ class TumDataset(DatasetKind):
             write_image(out_dir / "rgb" / f"{stem}.png", image, grey=sequence.grayscale)
             rgb_lines.append(f"{t} rgb/{stem}.png\n")
             if rgbd:
-                write_depth(out_dir / "depth" / f"{stem}.png", frame.depth, DEPTH_SCALE)
+                write_depth(out_dir / "depth" / f"{stem}.png", frame.require("depth"), DEPTH_SCALE)
                 depth_lines.append(f"{t} depth/{stem}.png\n")
         if not rgb_lines:
             raise DatasetError(f"{sequence.name}: no frames to write")

@@ -18,7 +18,6 @@ from typing import Any
 import numpy as np
 
 from sal_adapters import Sequence
-from sal_wrappers.base import SlamSystemError
 from sal_wrappers.child_process import write_result
 from sal_wrappers.orbslam3_states import TRACKED
 from sal_wrappers.pacing import process_usage
@@ -38,9 +37,7 @@ def frame_messages(sequence: Sequence, mode: str) -> Iterator[dict[str, Any]]:
     for frame in sequence:
         message: dict[str, Any] = {"timestamp": float(frame.timestamp), "image": _grey(frame.image)}
         if mode == "stereo":
-            if frame.right is None:
-                raise SlamSystemError(f"orbslam3: frame {frame.index} of {sequence.name!r} has no right image for stereo mode")
-            message["right"] = _grey(frame.right)
+            message["right"] = _grey(frame.require("right"))
         elif mode == "rgbd":
             depth = np.asarray(frame.depth, dtype=np.float32)
             message["depth"] = np.where(np.isfinite(depth) & (depth > 0), depth, np.float32(0.0))
