@@ -122,7 +122,8 @@ class CachedDepth:
         camera = self.sequence.camera
         depth, problem = read_stored(path, partial(read_depth, depth_scale=None))
         if depth is not None and depth.shape != (camera.height, camera.width):
-            depth, problem = None, f"depth array of shape {depth.shape}, the frames are {camera.height}x{camera.width} px"
+            problem = f"depth array of shape {depth.shape}, the frames are {camera.height}x{camera.width} px"
+            depth = None
         if problem is not None:
             done = "computed again and replaced" if self._store else "computed again (nothing is stored)"
             warnings.warn(CacheWarning(f"{path}: bad cached depth, {done}: {problem}"), stacklevel=4)
