@@ -37,6 +37,13 @@ class Features:
     def __len__(self) -> int:
         return len(self.xy)
 
+    @property
+    def descriptors(self) -> np.ndarray:
+        """``desc`` of detected keypoints (points followed by optical flow have none)."""
+        if self.desc is None:
+            raise ValueError("these keypoints were followed by optical flow: they have no ORB descriptors")
+        return self.desc
+
     def take(self, index: np.ndarray) -> Features:
         return Features(self.xy[index], self.pts[index], self.octave[index], None if self.desc is None else self.desc[index])
 
@@ -100,7 +107,7 @@ def guided_match(desc: np.ndarray, predicted: np.ndarray, current: Features, rad
     k = min(k, len(current))
     _, idx = cKDTree(current.pts).query(predicted[rows], k=k, distance_upper_bound=radius)
     idx = idx.reshape(len(rows), k)
-    out[rows] = best_matches(desc[rows], current.desc, idx, idx < len(current))[0]
+    out[rows] = best_matches(desc[rows], current.descriptors, idx, idx < len(current))[0]
     return out
 
 
@@ -109,6 +116,6 @@ def brute_match(desc: np.ndarray, current: Features) -> np.ndarray:
     out = np.full(len(desc), -1, np.int64)
     if len(desc) == 0 or len(current) < 2:
         return out
-    pairs = cv2.BFMatcher(cv2.NORM_HAMMING).knnMatch(desc, current.desc, k=2)
+    pairs = cv2.BFMatcher(cv2.NORM_HAMMING).knnMatch(desc, current.descriptors, k=2)
     idx = np.array([[m.trainIdx for m in p] + [-1] * (2 - len(p)) for p in pairs], np.int64)
-    return best_matches(desc, current.desc, np.maximum(idx, 0), idx >= 0)[0]
+    return best_matches(desc, current.descriptors, np.maximum(idx, 0), idx >= 0)[0]

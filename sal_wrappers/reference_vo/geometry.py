@@ -74,7 +74,7 @@ def stereo_points(
     safe = np.where(valid, idx, 0)
     valid &= np.abs(right.octave[safe] - left.octave[:, None]) <= 1
     valid &= right.xy[safe, 0] < left.xy[:, None, 0]
-    match, _ = best_matches(left.desc, right.desc, safe, valid)
+    match, _ = best_matches(left.descriptors, right.descriptors, safe, valid)
     rows = np.flatnonzero(match >= 0)
     if not len(rows):
         return out

@@ -82,8 +82,8 @@ def make_lens(sequence: Sequence, mode: str) -> Lens:
         return Lens(camera.K, None, None, (None, None), rig.baseline, np.eye(3))
     K_rect, R_rect = _rectified_camera(rig.to_rectified["left"], rig.inside["left"], camera.K, dist)
     kernel = np.ones((15, 15), np.uint8)
-    masks = tuple(cv2.erode(rig.inside[s], kernel, borderType=cv2.BORDER_CONSTANT, borderValue=0) * 255 for s in ("left", "right"))
-    return Lens(K_rect, None, (rig.to_rectified["left"], rig.to_rectified["right"]), masks, rig.baseline, R_rect)
+    left, right = (cv2.erode(rig.inside[s], kernel, borderType=cv2.BORDER_CONSTANT, borderValue=0) * 255 for s in ("left", "right"))
+    return Lens(K_rect, None, (rig.to_rectified["left"], rig.to_rectified["right"]), (left, right), rig.baseline, R_rect)
 
 
 def _rectified_camera(
