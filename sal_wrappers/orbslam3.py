@@ -39,15 +39,18 @@ says so too). Earlier attempts' logs are kept as ``orbslam3.attempt<N>.log``.
 from __future__ import annotations
 
 import dataclasses
+import importlib.metadata
 import importlib.util
 import math
+import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from sal_adapters import Sequence, Trajectory
-from sal_wrappers.base import WRITTEN_BEFORE_FAILURE, RunResult, SlamSystem, SlamSystemError
+from sal_adapters.cache_dir import user_cache_dir
+from sal_wrappers.base import WRITTEN_BEFORE_FAILURE, RunResult, SlamSystem, SlamSystemError, file_sha256
 from sal_wrappers.child_process import ChildOutcome, run_child
 from sal_wrappers.orbslam3_child import ENTRY, frame_messages
 from sal_wrappers.orbslam3_settings import OrbParameters, write_settings
@@ -180,11 +183,6 @@ class OrbSlam3(SlamSystem):
         """``SlamSystem.identity`` plus the installed pyorbslam3 version and the SHA-256 of the
         vocabulary and of a given settings file (hashed once per file version in a process:
         the 145 MB ORBvoc.txt takes about 0.1 s)."""
-        import importlib.metadata
-        import os
-
-        from sal_adapters.cache_dir import user_cache_dir
-        from sal_wrappers.base import file_sha256
         from sal_wrappers.vocabulary import BUILDER_VERSION, ENV_VARIABLE
 
         try:
