@@ -31,7 +31,7 @@ def _compare_fail(text: str) -> RegressionCheck:
 
 
 def _size(text: str) -> int:
-    from pytest_sal.store.trial_cache import parse_size
+    from pytest_sal.store.byte_sizes import parse_size
 
     try:
         return parse_size(text)
@@ -320,7 +320,7 @@ def _ini_segments(config: pytest.Config) -> tuple[float, ...]:
 
 
 def _ini_size(text: str) -> int:
-    from pytest_sal.store.trial_cache import parse_size
+    from pytest_sal.store.byte_sizes import parse_size
 
     try:
         return parse_size(text)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import inspect
 import json
 from abc import ABC, abstractmethod
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -36,14 +36,17 @@ WRITTEN_MARKER = "sal_sequence.json"
 
 
 class DatasetKind(ABC):
-    """A dataset layout: how to open it and how to write a sequence in it."""
+    """A dataset layout: how to open it and how to write a sequence in it.
+
+    Each kind defines ``open(self, path, *, <options>) -> Sequence``: open the dataset at
+    ``path`` (``None`` where a kind needs none); its keyword-only parameters are the kind's
+    options (``option_names``), so each kind declares its own signature.
+    """
 
     name: str = ""
     description: str = ""
-
-    @abstractmethod
-    def open(self, path: Path | None, **options: Any) -> Sequence:
-        """Open the dataset at ``path`` (options are the keyword arguments this method declares)."""
+    #: ``open(path, **options) -> Sequence`` with the keyword-only options the kind declares.
+    open: Callable[..., Sequence]
 
     @abstractmethod
     def write(self, sequence: Sequence, out_dir: Path, frames: Iterable[Frame]) -> Path:
@@ -147,16 +150,16 @@ def write_sequence(sequence: Sequence, out_dir: str | Path, layout: str | None =
             from tqdm.auto import tqdm
 
             frames = tqdm(frames, total=len(sequence), desc=f"writing {sequence.name}", unit="frame")
-        reopen = dataset.write(sequence, staging, frames)
+        reopen = str(dataset.write(sequence, staging, frames).relative_to(staging))
         marker = {
             "layout": kind,
-            "path": str(reopen.relative_to(staging)),
+            "path": reopen,
             "name": sequence.name,
             "frames": len(sequence),
             "source_fingerprint": sequence.fingerprint,
         }
         atomic_write_text(staging / WRITTEN_MARKER, json.dumps(marker, indent=2) + "\n")
-    return out_dir / marker["path"]
+    return out_dir / reopen
 
 
 def _refuse_source_overlap(sequence: Sequence, out_dir: Path) -> None:

@@ -5,7 +5,8 @@ Frames are named by their capture time in integer nanoseconds. Each camera's ``s
 holds its intrinsics ``[fu, fv, cu, cv]`` (px), radial-tangential distortion ``[k1, k2, p1, p2]``,
 resolution, rate (Hz) and ``T_BS``, its pose in the body (IMU) frame. The right camera sits at
 ``T_left_right = inv(T_BS_cam0) @ T_BS_cam1`` in the left camera frame. The standard ground truth
-gives body poses ``T_WB``; the camera-0 poses are ``T_WC = T_WB @ T_BS_cam0``.
+gives body poses ``T_WB``; the camera-0 poses are ``T_WC = T_WB @ T_BS_cam0``. The camera
+files themselves are read and written by ``sal_adapters.euroc_files``.
 """
 
 from __future__ import annotations
@@ -14,48 +15,34 @@ import re
 import shutil
 import warnings
 from collections.abc import Iterable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from sal_adapters.atomic import copy_tree
 from sal_adapters.camera import Camera
 from sal_adapters.datasets import DatasetKind
 from sal_adapters.errors import DatasetError, DatasetWarning
+from sal_adapters.euroc_files import (
+    FRAME_CSV_HEADER,
+    GT_SENSOR_YAML,
+    CameraSensor,
+    FrameRow,
+    read_camera_sensor,
+    read_frame_csv,
+    read_sensor_yaml,
+    read_transform,
+    sensor_yaml,
+)
 from sal_adapters.images import probe_image, write_image
 from sal_adapters.sequence import Frame, FrameRecord, Sequence
-from sal_adapters.textfiles import atomic_write_text, check_times, read_rows, read_text
+from sal_adapters.textfiles import atomic_write_text
 from sal_adapters.trajectory import Trajectory, seconds_to_ns
 
-__all__ = ["EUROC", "CameraSensor", "EurocDataset", "FrameRow", "read_camera_sensor", "read_frame_csv", "read_sensor_yaml"]
+__all__ = ["EUROC", "GROUNDTRUTH_FRAMES", "EurocDataset"]
 
-#: Keys every camera ``sensor.yaml`` must hold.
-CAMERA_KEYS = ("T_BS", "rate_hz", "resolution", "intrinsics", "distortion_coefficients")
 GROUNDTRUTH_FRAMES = ("body", "camera")
-FRAME_CSV_HEADER = "#timestamp [ns],filename"
-_RADTAN_NAMES = ("radial-tangential", "radtan", "plumb_bob", "none")
-
-
-@dataclass(frozen=True)
-class CameraSensor:
-    """One camera's ``sensor.yaml``: intrinsics and distortion, rate (Hz) and pose in the body
-    frame (``T_BS``, 4x4)."""
-
-    camera: Camera
-    rate_hz: float
-    T_BS: np.ndarray
-
-
-@dataclass(frozen=True)
-class FrameRow:
-    """One ``data.csv`` row: its line number, time (ns) and image file."""
-
-    line: int
-    ns: int
-    file: Path
 
 
 class EurocDataset(DatasetKind):
@@ -172,22 +159,22 @@ class EurocDataset(DatasetKind):
             stamps.append(ns)
             write_image(mav0 / "cam0" / "data" / f"{ns}.png", _sized(frame.image, sequence.camera, sequence, record), grey=grey)
             if stereo:
-                right = _sized(frame.right, sequence.camera.right or sequence.camera, sequence, record)
+                right = _sized(frame.require("right"), sequence.camera.right or sequence.camera, sequence, record)
                 write_image(mav0 / "cam1" / "data" / f"{ns}.png", right, grey=grey)
 
         cameras = [("cam0", sequence.camera, T_BS0)]
-        if stereo:
+        if T_BS1 is not None:  # stereo
             cameras.append(("cam1", sequence.camera.right or sequence.camera, T_BS1))
         for cam_name, camera, T_BS in cameras:
             csv = "".join(f"{ns},{ns}.png\n" for ns in stamps)
             atomic_write_text(mav0 / cam_name / "data.csv", FRAME_CSV_HEADER + "\n" + csv)
-            text = _sensor_yaml(camera, T_BS, sequence.fps, f"{cam_name} of {sequence.name}, written by pytest-sal")
+            text = sensor_yaml(camera, T_BS, sequence.fps, f"{cam_name} of {sequence.name}, written by pytest-sal")
             atomic_write_text(mav0 / cam_name / "sensor.yaml", text)
 
         if sequence.groundtruth is not None:
             body = sequence.groundtruth.transformed(right=np.linalg.inv(T_BS0))
             body.write_euroc(mav0 / "state_groundtruth_estimate0" / "data.csv")
-            atomic_write_text(mav0 / "state_groundtruth_estimate0" / "sensor.yaml", _GT_SENSOR_YAML)
+            atomic_write_text(mav0 / "state_groundtruth_estimate0" / "sensor.yaml", GT_SENSOR_YAML)
         source_mav0 = None if sequence.source is None else sequence.source / "mav0"
         if from_euroc and source_mav0 is not None:
             if (source_mav0 / "imu0").is_dir():
@@ -195,73 +182,6 @@ class EurocDataset(DatasetKind):
             if (source_mav0 / "body.yaml").is_file():
                 shutil.copyfile(source_mav0 / "body.yaml", mav0 / "body.yaml")
         return seq_dir
-
-
-# -- reading ---------------------------------------------------------------------------------------
-def read_sensor_yaml(path: Path) -> dict[str, Any]:
-    """Parse a EuRoC ``sensor.yaml`` (the OpenCV ``%YAML:1.0`` directive is dropped)."""
-    path = Path(path)
-    text = read_text(path, what="sensor file")
-    text = re.sub(r"\A%YAML[: ]\s*1\.\d+[^\n]*", "", text)  # keeps the line numbers
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        line = None if mark is None else mark.line + 1
-        raise DatasetError(f"cannot parse YAML ({getattr(exc, 'problem', None) or exc})", path, line) from None
-    if not isinstance(data, dict):
-        raise DatasetError("expected a YAML mapping of sensor keys", path)
-    return data
-
-
-def read_camera_sensor(path: Path) -> CameraSensor:
-    """Camera, rate (Hz) and ``T_BS`` from a camera ``sensor.yaml``; every key of ``CAMERA_KEYS``
-    must be present."""
-    path = Path(path)
-    data = read_sensor_yaml(path)
-    missing = [key for key in CAMERA_KEYS if key not in data]
-    if missing:
-        raise DatasetError(f"missing key {', '.join(map(repr, missing))} (a camera sensor.yaml needs {', '.join(CAMERA_KEYS)})", path)
-    model = str(data.get("camera_model", "pinhole"))
-    if model != "pinhole":
-        raise DatasetError(f"camera_model {model!r} is not supported (pinhole only)", path)
-    dist_model = str(data.get("distortion_model", "radial-tangential"))
-    if dist_model not in _RADTAN_NAMES:
-        raise DatasetError(f"distortion_model {dist_model!r} is not supported (radial-tangential only)", path)
-    intrinsics = _numbers(data, "intrinsics", path, (4,))
-    resolution = _numbers(data, "resolution", path, (2,))
-    distortion = _numbers(data, "distortion_coefficients", path, (0, 4, 5))
-    T_BS = _matrix(data["T_BS"], path)
-    rate = data["rate_hz"]
-    if isinstance(rate, bool) or not isinstance(rate, (int, float)) or not 0 < rate < float("inf"):
-        raise DatasetError(f"key 'rate_hz' must be a positive number (Hz), got {rate!r}", path)
-    if any(v != int(v) for v in resolution):
-        raise DatasetError(f"key 'resolution' must be two integers [width, height] (px), got {data['resolution']!r}", path)
-    try:
-        camera = Camera(*intrinsics, width=int(resolution[0]), height=int(resolution[1]), distortion=tuple(distortion))
-    except ValueError as exc:
-        raise DatasetError(str(exc), path) from None
-    return CameraSensor(camera=camera, rate_hz=float(rate), T_BS=T_BS)
-
-
-def read_frame_csv(path: Path) -> list[FrameRow]:
-    """Rows of a camera ``data.csv``: ``timestamp [ns], filename`` (relative to ``data/``).
-
-    Timestamps must be integers and increase; a bad line raises ``DatasetError`` with its number.
-    """
-    path = Path(path)
-    folder = path.parent / "data"
-    rows: list[FrameRow] = []
-    for number, fields in read_rows(path, delimiter=","):
-        if not rows and fields[0].lower().startswith("timestamp"):
-            continue  # a header written without '#'
-        if len(fields) != 2 or not fields[1]:
-            raise DatasetError(f"expected 2 comma-separated values (timestamp [ns], filename), got {len(fields)}", path, number)
-        if not fields[0].isdigit():
-            raise DatasetError(f"expected an integer timestamp in ns, got {fields[0]!r}", path, number)
-        rows.append(FrameRow(number, int(fields[0]), folder / fields[1]))
-    check_times(((row.line, row.ns) for row in rows), path, unit="ns")
-    return rows
 
 
 def _usable_frames(rows0: list[FrameRow], rows1: list[FrameRow], stereo: bool, mav0: Path) -> list[tuple[int, FrameRow, FrameRow | None]]:
@@ -323,7 +243,7 @@ def _groundtruth(seq_dir: Path, T_BS0: np.ndarray, explicit: str | Path | None, 
         if (gt_dir / "sensor.yaml").is_file():
             data = read_sensor_yaml(gt_dir / "sensor.yaml")
             if "T_BS" in data:  # pose of the estimated frame in the body frame
-                T_gt_body = np.linalg.inv(_matrix(data["T_BS"], gt_dir / "sensor.yaml"))
+                T_gt_body = np.linalg.inv(read_transform(data["T_BS"], gt_dir / "sensor.yaml"))
     else:
         found = sorted(p for p in seq_dir.glob("*.csv") if p.is_file() and (p.name.lower().startswith("groundtruth") or "_GT" in p.name))
         if not found:
@@ -375,35 +295,6 @@ def _is_single_channel(source: Any) -> bool:
     return probe_image(source)[2]
 
 
-def _numbers(data: dict[str, Any], key: str, path: Path, counts: tuple[int, ...]) -> list[float]:
-    """The list of numbers under ``key``; its length must be one of ``counts``."""
-    value = data[key]
-    numbers: list[float] | None = None
-    if isinstance(value, (list, tuple)):
-        try:
-            numbers = [float(v) for v in value]
-        except (TypeError, ValueError):
-            numbers = None
-    if numbers is None or len(numbers) not in counts or not np.all(np.isfinite(numbers)):
-        expected = " or ".join(map(str, counts))
-        raise DatasetError(f"key {key!r} must be a list of {expected} numbers, got {value!r}", path)
-    return numbers
-
-
-def _matrix(value: Any, path: Path) -> np.ndarray:
-    """A 4x4 ``T_BS`` from ``{cols: 4, rows: 4, data: [16 numbers]}`` (or a nested list)."""
-    data = value.get("data") if isinstance(value, dict) else value
-    try:
-        T = np.array(data, dtype=np.float64).reshape(4, 4)
-    except (TypeError, ValueError):
-        raise DatasetError(f"key 'T_BS' must hold 16 numbers (4x4 row-major), got {value!r}", path) from None
-    if isinstance(value, dict) and (value.get("rows", 4) != 4 or value.get("cols", 4) != 4):
-        raise DatasetError("key 'T_BS' must be 4 rows x 4 cols", path)
-    if not np.all(np.isfinite(T)) or abs(np.linalg.det(T[:3, :3]) - 1.0) > 1e-3:
-        raise DatasetError("key 'T_BS' is not a rigid transform (its rotation has determinant != 1)", path)
-    return T
-
-
 def _same_intrinsics(a: Camera, b: Camera) -> bool:
     return (a.fx, a.fy, a.cx, a.cy, a.width, a.height, tuple(a.distortion)) == (
         b.fx,
@@ -421,22 +312,6 @@ def _flat(T: np.ndarray) -> list[float]:
 
 
 # -- writing ---------------------------------------------------------------------------------------
-_GT_SENSOR_YAML = """%YAML:1.0
-# General sensor definitions.
-sensor_type: visual-inertial
-comment: Body (IMU) frame poses, written by pytest-sal.
-
-# Sensor extrinsics wrt. the body-frame.
-T_BS:
-  cols: 4
-  rows: 4
-  data: [1.0, 0.0, 0.0, 0.0,
-         0.0, 1.0, 0.0, 0.0,
-         0.0, 0.0, 1.0, 0.0,
-         0.0, 0.0, 0.0, 1.0]
-"""
-
-
 def _folder_name(sequence: Sequence, from_euroc: bool) -> str:
     name = str(sequence.meta.get("sequence", "")) if from_euroc else ""
     name = name or sequence.name.replace("\\", "/").rstrip("/").rsplit("/", 1)[-1]
@@ -468,43 +343,6 @@ def _sized(image: np.ndarray, camera: Camera, sequence: Sequence, record: FrameR
             f"is {camera.width}x{camera.height} px"
         )
     return image
-
-
-def _sensor_yaml(camera: Camera, T_BS: np.ndarray, fps: float, comment: str) -> str:
-    """A camera ``sensor.yaml`` that reads back to exactly ``camera`` (values as shortest floats)."""
-    T = [_yaml_float(v) for v in np.ravel(T_BS)]
-    rows = ",\n         ".join(", ".join(T[4 * r : 4 * r + 4]) for r in range(4))
-    intrinsics = ", ".join(_yaml_float(v) for v in (camera.fx, camera.fy, camera.cx, camera.cy))
-    distortion = ", ".join(_yaml_float(v) for v in camera.distortion)
-    return (
-        "%YAML:1.0\n"
-        "# General sensor definitions.\n"
-        "sensor_type: camera\n"
-        f"comment: {_yaml_string(comment)}\n\n"
-        "# Sensor extrinsics wrt. the body-frame.\n"
-        "T_BS:\n  cols: 4\n  rows: 4\n"
-        f"  data: [{rows}]\n\n"
-        "# Camera specific definitions.\n"
-        f"rate_hz: {_yaml_float(fps)}\n"
-        f"resolution: [{int(camera.width)}, {int(camera.height)}]\n"
-        "camera_model: pinhole\n"
-        f"intrinsics: [{intrinsics}] #fu, fv, cu, cv\n"
-        "distortion_model: radial-tangential\n"
-        f"distortion_coefficients: [{distortion}]\n"
-    )
-
-
-def _yaml_float(value: float) -> str:
-    """Shortest round-trip text of a float that YAML 1.1 also reads as a float (``1.0e-05``)."""
-    text = repr(float(value))
-    mantissa, e, exponent = text.partition("e")
-    if e and "." not in mantissa:
-        text = f"{mantissa}.0e{exponent}"
-    return text
-
-
-def _yaml_string(text: str) -> str:
-    return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
 
 
 EUROC = EurocDataset()

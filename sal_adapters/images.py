@@ -133,10 +133,10 @@ def _imwrite(path: Path, data: np.ndarray) -> None:
     ok, encoded = cv2.imencode(path.suffix or ".png", data)
     if not ok:
         raise ValueError(f"{path}: OpenCV cannot encode this image type")
-    _store(path, encoded)
+    _store(path, encoded.data)
 
 
-def _store(path: Path, data: memoryview | np.ndarray) -> None:
+def _store(path: Path, data: memoryview) -> None:
     """Write ``data`` to ``path`` through a uniquely named temporary file beside it (concurrent
     writers of one file never share it); ``WriteError`` naming ``path`` on failure."""
     with staged_file(path) as temp, open(temp, "wb") as handle:

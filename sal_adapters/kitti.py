@@ -68,35 +68,8 @@ class KittiDataset(DatasetKind):
         times = read_times(times_path)
         if len(times) != len(left_files):
             raise DatasetError(f"{len(times)} timestamps for {len(left_files)} images in {left_name}/", times_path)
-        right_files: list[Path | None] = [None] * len(left_files)
-        if stereo:
-            right_files = [seq_dir / right_name / f.name for f in left_files]
-            missing = [f for f in right_files if not f.is_file()]
-            if missing:
-                raise DatasetError(
-                    f"stereo needs a right image for every left image: {len(missing)} of {len(right_files)} "
-                    f"missing (first: {missing[0].name})",
-                    seq_dir / right_name,
-                )
-
-        first = read_image(left_files[0])
-        P_left = calib[left_key]
-        camera = Camera(
-            fx=P_left[0, 0],
-            fy=P_left[1, 1],
-            cx=P_left[0, 2],
-            cy=P_left[1, 2],
-            width=first.shape[1],
-            height=first.shape[0],
-        )
-        t_left = _camera0_to_camera(P_left)
-        if stereo:
-            T_lr = np.eye(4)
-            T_lr[:3, 3] = t_left - _camera0_to_camera(calib[right_key])
-            camera = camera.with_stereo(T_lr)
-        T_c0_left = np.eye(4)
-        T_c0_left[:3, 3] = -t_left
-
+        right_files: list[Path | None] = list(_right_files(seq_dir / right_name, left_files)) if stereo else [None] * len(left_files)
+        camera, T_c0_left = _camera(calib, left_key, right_key if stereo else None, read_image(left_files[0]).shape)
         records = [
             FrameRecord(index=i, timestamp=float(t), stem=f.stem, image=f, right=r)
             for i, (t, f, r) in enumerate(zip(times, left_files, right_files))
@@ -138,7 +111,7 @@ class KittiDataset(DatasetKind):
             stem = f"{position:06d}"
             write_image(seq_dir / left_name / f"{stem}.png", frame.image, grey=not color)
             if stereo:
-                write_image(seq_dir / right_name / f"{stem}.png", frame.right, grey=not color)
+                write_image(seq_dir / right_name / f"{stem}.png", frame.require("right"), grey=not color)
         write_times(seq_dir / "times.txt", sequence.timestamps)
         calib, T_c0_left = _calib_for(sequence, left_key, right_key)
         lines = [f"{key}: " + " ".join(f"{v:.12e}" for v in np.ravel(value)) for key, value in calib.items()]
@@ -177,6 +150,33 @@ def read_calib(path: Path, required: list[str]) -> dict[str, np.ndarray]:
 def _camera0_to_camera(P: np.ndarray) -> np.ndarray:
     """``t = K^-1 P[:, 3]``: translation from camera 0 to the rectified camera of ``P`` (m)."""
     return np.linalg.solve(P[:, :3], P[:, 3])
+
+
+def _right_files(folder: Path, left_files: list[Path]) -> list[Path]:
+    """The right image of every left image (same name in ``folder``); all must exist."""
+    right_files = [folder / f.name for f in left_files]
+    missing = [f for f in right_files if not f.is_file()]
+    if missing:
+        raise DatasetError(
+            f"stereo needs a right image for every left image: {len(missing)} of {len(right_files)} missing (first: {missing[0].name})",
+            folder,
+        )
+    return right_files
+
+
+def _camera(calib: dict[str, np.ndarray], left_key: str, right_key: str | None, shape: tuple[int, ...]) -> tuple[Camera, np.ndarray]:
+    """The left camera of images of ``shape`` from its ``calib.txt`` matrix (with the right
+    camera's offset when ``right_key`` is given), and ``T_c0_left``, its pose in camera 0."""
+    P_left = calib[left_key]
+    camera = Camera(fx=P_left[0, 0], fy=P_left[1, 1], cx=P_left[0, 2], cy=P_left[1, 2], width=shape[1], height=shape[0])
+    t_left = _camera0_to_camera(P_left)
+    if right_key is not None:
+        T_lr = np.eye(4)
+        T_lr[:3, 3] = t_left - _camera0_to_camera(calib[right_key])
+        camera = camera.with_stereo(T_lr)
+    T_c0_left = np.eye(4)
+    T_c0_left[:3, 3] = -t_left
+    return camera, T_c0_left
 
 
 def _sequence_dir(path: Path | None, sequence: str | int | None) -> Path:

@@ -85,6 +85,10 @@ def read_camera_yaml(path: Path, width: int, height: int) -> Camera:
     def fail(message: str, key: str | None = None) -> DatasetError:
         return DatasetError(message, path, lines.get(key) if key else None)
 
+    def failing(key: str) -> Callable[[str], DatasetError]:
+        """``fail`` for a bad value of ``key``, the message prefixed with the key."""
+        return lambda message: fail(f"{key}: {message}", key)
+
     unknown = [str(k) for k in data if k not in _CAMERA_KEYS]
     if unknown:
         raise fail(f"unknown key {unknown[0]!r} (allowed: {', '.join(_CAMERA_KEYS)})", unknown[0])
@@ -92,20 +96,20 @@ def read_camera_yaml(path: Path, width: int, height: int) -> Camera:
     for key in ("fx", "fy", "cx", "cy"):
         if key not in data:
             raise fail(f"missing {key} (px)")
-        values[key] = _number(data[key], lambda m, k=key: fail(f"{k}: {m}", k))
+        values[key] = _number(data[key], failing(key))
     for key, actual in (("width", width), ("height", height)):
         if data.get(key) is not None:
-            given = _number(data[key], lambda m, k=key: fail(f"{k}: {m}", k))
+            given = _number(data[key], failing(key))
             if given != actual:
                 raise fail(f"{key} is {given:g} px but the images are {width}x{height} px", key)
     distortion = data.get("distortion") or ()
     if not isinstance(distortion, list | tuple) or len(distortion) not in (0, *_DISTORTION_COUNTS):
         counts = ", ".join(map(str, _DISTORTION_COUNTS))
         raise fail(f"distortion must be a list of {counts} numbers (k1 k2 p1 p2 [k3 ...]) or empty", "distortion")
-    values["distortion"] = tuple(_number(v, lambda m: fail(f"distortion: {m}", "distortion")) for v in distortion)
+    values["distortion"] = tuple(_number(v, failing("distortion")) for v in distortion)
     scale = data.get("depth_scale")
     if scale is not None:
-        scale = _number(scale, lambda m: fail(f"depth_scale: {m}", "depth_scale"))
+        scale = _number(scale, failing("depth_scale"))
         if scale <= 0:
             raise fail(f"depth_scale must be > 0 (raw units per metre), got {scale:g}", "depth_scale")
     try:

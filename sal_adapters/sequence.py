@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -17,10 +17,19 @@ from sal_adapters.errors import DatasetError
 from sal_adapters.images import read_depth, read_image
 from sal_adapters.trajectory import Trajectory
 
-__all__ = ["SENSORS", "Frame", "FrameRecord", "Sensor", "Sequence", "Source"]
+__all__ = ["SENSORS", "Frame", "FrameRecord", "Sensor", "Sequence", "Source", "as_sensor"]
 
 Sensor = Literal["mono", "stereo", "rgbd"]
 SENSORS: tuple[str, ...] = ("mono", "stereo", "rgbd")
+
+
+def as_sensor(name: object) -> Sensor:
+    """``name`` as a ``Sensor`` (``mono``, ``stereo`` or ``rgbd``); ``ValueError`` for anything else."""
+    match name:
+        case "mono" | "stereo" | "rgbd":
+            return name
+    raise ValueError(f"sensor must be one of {', '.join(SENSORS)}; got {name!r}")
+
 
 #: Where a frame's pixels come from: an image file, or a function that makes them.
 Source = Path | Callable[[], np.ndarray]
@@ -81,6 +90,14 @@ class Frame:
         if self.record.depth is None:
             return None
         return _decode(self.record.depth, lambda p: read_depth(p, self._camera.depth_scale))
+
+    def require(self, what: Literal["right", "depth"]) -> np.ndarray:
+        """The right image or the depth map of a frame that must have it (a stereo or an RGB-D
+        sequence's); ``DatasetError`` naming the frame when it has none."""
+        value = self.right if what == "right" else self.depth
+        if value is None:
+            raise DatasetError(f"frame {self.index} has no {'right image' if what == 'right' else 'depth map'}")
+        return value
 
     def __repr__(self) -> str:
         return f"Frame(index={self.index}, timestamp={self.timestamp:.6f})"
@@ -169,7 +186,7 @@ class Sequence:
     # -- derived sequences ---------------------------------------------------------------------
     def replace(self, **changes: Any) -> Sequence:
         """Copy with some constructor arguments changed."""
-        args = {
+        args: dict[str, Any] = {
             "kind": self.kind,
             "name": self.name,
             "camera": self.camera,
@@ -185,7 +202,7 @@ class Sequence:
         args.update(changes)
         return Sequence(**args)
 
-    def select(self, positions: list[int] | np.ndarray) -> Sequence:
+    def select(self, positions: Iterable[int] | np.ndarray) -> Sequence:
         """The frames at ``positions`` (in order); per-frame ground truth follows them."""
         positions = [int(p) for p in positions]
         records = [self.records[p] for p in positions]

@@ -133,15 +133,12 @@ def format_float(value: float) -> str:
     return repr(float(value))
 
 
-def atomic_write(path: str | Path, write: Callable[[IO[Any]], None], binary: bool = False) -> Path:
+def atomic_write(path: str | Path, write: Callable[[IO[Any]], object], binary: bool = False) -> Path:
     """Create ``path`` through a temporary file in the same folder, filled by ``write(handle)``,
     flushed to disk and moved into place with ``os.replace``: readers see the old file or the
     whole new one, never a part. The file gets the usual permissions (0666 less the umask); an
     ``OSError`` raises ``WriteError`` naming ``path``."""
-    with (
-        staged_file(path) as temp,
-        open(temp, "wb" if binary else "w", **({} if binary else {"encoding": "utf-8", "newline": "\n"})) as handle,
-    ):
+    with staged_file(path) as temp, open(temp, "wb") if binary else open(temp, "w", encoding="utf-8", newline="\n") as handle:
         write(handle)
         handle.flush()
         os.fsync(handle.fileno())

@@ -17,6 +17,7 @@ import re
 import warnings
 from collections.abc import Iterable
 from dataclasses import replace
+from functools import partial
 from pathlib import Path, PurePosixPath
 
 import numpy as np
@@ -117,25 +118,11 @@ class TumDataset(DatasetKind):
             )
             for i, depth_name in pairs
         ]
-        width, height, grey = probe_image(records[0].image)
-        if use_depth and not records[0].depth.is_file():  # type: ignore[union-attr]
-            raise DatasetError("depth image not found", records[0].depth)
-
-        def fallback() -> Camera:
-            camera_id = freiburg_camera(folder.name)
-            if camera_id is None:
-                fx, fy, cx, cy = ROS_DEFAULT_INTRINSICS
-                warnings.warn(
-                    f"{folder}: no Freiburg camera (freiburg1/fr1 .. freiburg3/fr3) in the folder name and no "
-                    f"{CAMERA_FILE}; assuming the ROS default intrinsics fx={fx} fy={fy} cx={cx} cy={cy} px without "
-                    f"distortion. Pass intrinsics=(fx, fy, cx, cy) or add {CAMERA_FILE} to override.",
-                    DatasetWarning,
-                    stacklevel=4,
-                )
-                return Camera(fx=fx, fy=fy, cx=cx, cy=cy, width=width, height=height)
-            (fx, fy, cx, cy), coeffs = FREIBURG_CAMERAS[camera_id]
-            return Camera(fx=fx, fy=fy, cx=cx, cy=cy, width=width, height=height, distortion=coeffs)
-
+        first, first_depth = pairs[0]
+        width, height, grey = probe_image(folder / rgb_names[first])
+        if first_depth is not None and not (folder / first_depth).is_file():
+            raise DatasetError("depth image not found", folder / first_depth)
+        fallback = partial(_default_camera, folder, width, height)
         camera = select_camera(folder, width, height, intrinsics, distortion, fallback)
         camera = replace(camera, depth_scale=(camera.depth_scale or DEPTH_SCALE) if use_depth else None)
         gt_path = folder / "groundtruth.txt"
@@ -173,7 +160,7 @@ class TumDataset(DatasetKind):
             write_image(out_dir / "rgb" / f"{stem}.png", image, grey=sequence.grayscale)
             rgb_lines.append(f"{t} rgb/{stem}.png\n")
             if rgbd:
-                write_depth(out_dir / "depth" / f"{stem}.png", frame.depth, DEPTH_SCALE)
+                write_depth(out_dir / "depth" / f"{stem}.png", frame.require("depth"), DEPTH_SCALE)
                 depth_lines.append(f"{t} depth/{stem}.png\n")
         if not rgb_lines:
             raise DatasetError(f"{sequence.name}: no frames to write")
@@ -263,6 +250,24 @@ def _sequence_names(sequence: str) -> list[str]:
     if not long.startswith("rgbd_dataset_"):
         names.append("rgbd_dataset_" + long)
     return list(dict.fromkeys(names))
+
+
+def _default_camera(folder: Path, width: int, height: int) -> Camera:
+    """The Freiburg camera named in the folder name, else the ROS default (warned): the
+    camera of a sequence without ``camera.yaml`` and without an ``intrinsics=`` option."""
+    camera_id = freiburg_camera(folder.name)
+    if camera_id is None:
+        fx, fy, cx, cy = ROS_DEFAULT_INTRINSICS
+        warnings.warn(
+            f"{folder}: no Freiburg camera (freiburg1/fr1 .. freiburg3/fr3) in the folder name and no "
+            f"{CAMERA_FILE}; assuming the ROS default intrinsics fx={fx} fy={fy} cx={cx} cy={cy} px without "
+            f"distortion. Pass intrinsics=(fx, fy, cx, cy) or add {CAMERA_FILE} to override.",
+            DatasetWarning,
+            stacklevel=4,  # called by select_camera, called by open: the warning names open's caller
+        )
+        return Camera(fx=fx, fy=fy, cx=cx, cy=cy, width=width, height=height)
+    (fx, fy, cx, cy), coeffs = FREIBURG_CAMERAS[camera_id]
+    return Camera(fx=fx, fy=fy, cx=cx, cy=cy, width=width, height=height, distortion=coeffs)
 
 
 def _depth_pairs(folder: Path, rgb_times: np.ndarray, rgb_names: list[str], max_time_diff: float) -> list[tuple[int, str | None]]:

@@ -18,8 +18,8 @@ from typing import TYPE_CHECKING, Any
 from sal_adapters.lazy import lazy_exports
 
 if TYPE_CHECKING:  # what type checkers see; at run time each name loads on first use
-    from sal_modules.base import STREAMS, ModuleContext, Perturbation, SequencePerturbation
-    from sal_modules.chain import Composite
+    from sal_modules.base import Composite, Perturbation, SequencePerturbation
+    from sal_modules.context import STREAMS, ModuleContext
     from sal_modules.errors import DepthUnavailable, ModuleError, ParameterError
     from sal_modules.params import Param, SearchScale
     from sal_modules.pipeline import chain_of, perturb
@@ -61,8 +61,8 @@ def _registered(name: str) -> Any:
 __getattr__, __dir__ = lazy_exports(
     __name__,
     {
-        "sal_modules.base": ["STREAMS", "ModuleContext", "Perturbation", "SequencePerturbation"],
-        "sal_modules.chain": ["Composite"],
+        "sal_modules.base": ["Composite", "Perturbation", "SequencePerturbation"],
+        "sal_modules.context": ["STREAMS", "ModuleContext"],
         "sal_modules.errors": ["DepthUnavailable", "ModuleError", "ParameterError"],
         "sal_modules.params": ["Param", "SearchScale"],
         "sal_modules.pipeline": ["chain_of", "perturb"],

@@ -1,4 +1,4 @@
-"""The perturbation module contract: declared parameters, a per-sequence life cycle, JSON.
+"""The perturbation module contract and its composition: ``Perturbation`` and ``Composite``.
 
 Life cycle for one sequence (``sal_modules.perturb`` drives it)::
 
@@ -13,92 +13,28 @@ per-frame randomness keyed by it is the same whatever else the chain does.
 Randomness comes only from ``self.rng(...)``: a generator derived from the sequence seed, the
 module name and the keys given, never from the parameter values. A stronger setting therefore
 reuses the same random pattern (common random numbers), which keeps boundary search sound.
+
+``a >> b`` is a ``Composite``, and a ``Composite`` is a ``Perturbation``: the two are defined
+together here, so imports run one way (``registry`` builds modules by name on top of this).
 """
 
 from __future__ import annotations
 
 import json
-import zlib
 from abc import ABCMeta, abstractmethod
-from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, ClassVar
+from collections.abc import Iterable
+from typing import Any, ClassVar
 
 import numpy as np
 
-from sal_adapters.camera import Camera
-from sal_adapters.sequence import Sequence
+from sal_adapters.json_values import json_safe
 from sal_adapters.suggest import suggestion
+from sal_modules.context import ModuleContext
 from sal_modules.errors import ModuleError, ParameterError
+from sal_modules.param_refs import ParamRef
 from sal_modules.params import Param
 
-if TYPE_CHECKING:
-    from sal_modules.chain import Composite
-    from sal_modules.param_refs import ParamRef
-
-__all__ = ["STREAMS", "DepthLookup", "ModuleContext", "Perturbation", "SequencePerturbation"]
-
-#: Image streams of a sequence: the (left) camera and, for stereo, the right camera.
-STREAMS: tuple[str, ...] = ("left", "right")
-
-#: ``depth(index, stream) -> float32 HxW metres (0 = invalid)`` of the clean sequence.
-DepthLookup = Callable[[int, str], np.ndarray]
-
-
-@dataclass(frozen=True)
-class ModuleContext:
-    """What a module may know about the sequence it perturbs.
-
-    Attributes:
-        sequence: the clean input sequence (camera, fps, timestamps, ground truth, frames).
-        seed: the perturbation seed; every random pattern derives from it.
-        depth: depth of the clean frames by dataset index and stream, or ``None`` when the
-            chain needs none.
-    """
-
-    sequence: Sequence
-    seed: int = 0
-    depth: DepthLookup | None = None
-    _positions: dict[int, int] = field(default_factory=dict, repr=False, compare=False)
-
-    @property
-    def camera(self) -> Camera:
-        return self.sequence.camera
-
-    @property
-    def fps(self) -> float:
-        return self.sequence.fps
-
-    @property
-    def frame_count(self) -> int:
-        return len(self.sequence)
-
-    def camera_for(self, stream: str) -> Camera:
-        """Intrinsics of ``stream`` (the right camera's when the sequence has one)."""
-        if stream == "right" and self.camera.right is not None:
-            return self.camera.right
-        return self.camera
-
-    def position(self, index: int) -> int:
-        """Position in ``sequence`` of the frame with dataset index ``index``."""
-        if not self._positions:
-            self._positions.update({r.index: p for p, r in enumerate(self.sequence.records)})
-        try:
-            return self._positions[index]
-        except KeyError:
-            raise ModuleError(f"frame index {index} is not in sequence {self.sequence.name!r}") from None
-
-    def pose(self, index: int) -> np.ndarray | None:
-        """Camera-to-world 4x4 pose (m) of frame ``index`` from per-frame ground truth, else ``None``."""
-        gt = self.sequence.groundtruth
-        if gt is None or not self.sequence.groundtruth_is_per_frame:
-            return None
-        return gt.select([self.position(index)]).matrices[0]
-
-    def rng(self, *keys: str | int) -> np.random.Generator:
-        """A generator that depends only on ``seed`` and ``keys`` (strings hashed with CRC-32)."""
-        words = [self.seed & 0xFFFFFFFF] + [zlib.crc32(k.encode()) if isinstance(k, str) else int(k) & 0xFFFFFFFF for k in keys]
-        return np.random.default_rng(np.random.SeedSequence(words))
+__all__ = ["Composite", "Perturbation", "SequencePerturbation"]
 
 
 class _ModuleClass(ABCMeta):
@@ -201,8 +137,6 @@ class Perturbation(metaclass=_ModuleClass):
         """Parameter ``name`` of this configured module, for a bound that keeps its other
         settings: ``motion_blur(exposure_ms=100).ref("speed_kmh") >= 30`` (on an instance,
         ``.speed_kmh`` is the value itself)."""
-        from sal_modules.param_refs import ParamRef
-
         if name not in self.parameters():
             raise self.param_error(self.unknown_parameter(name))
         return ParamRef(self, name, self.parameters()[name])
@@ -215,14 +149,14 @@ class Perturbation(metaclass=_ModuleClass):
     # -- identity and JSON ---------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
         """``{"module": name, "version": v, "params": {...}}`` with JSON types only."""
-        return {"module": self.name, "version": self.version, "params": {k: _jsonable(v) for k, v in self._params.items()}}
+        return {"module": self.name, "version": self.version, "params": json_safe(self._params)}
 
     def to_json(self) -> str:
         """Canonical JSON (sorted keys): equal modules give equal strings."""
         return json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))
 
     def __eq__(self, other: object) -> bool:
-        return type(other) is type(self) and other.to_json() == self.to_json()  # type: ignore[attr-defined]
+        return type(other) is type(self) and other.to_json() == self.to_json()
 
     def __hash__(self) -> int:
         return hash(self.to_json())
@@ -233,13 +167,9 @@ class Perturbation(metaclass=_ModuleClass):
 
     def __rshift__(self, other: Perturbation | type[Perturbation]) -> Composite:
         """``a >> b``: the chain that applies ``a`` first, then ``b`` (a class means its defaults)."""
-        from sal_modules.chain import Composite
-
         return Composite.chain(self, other)
 
     def __rrshift__(self, other: type[Perturbation]) -> Composite:
-        from sal_modules.chain import Composite
-
         return Composite.chain(other, self)
 
     # -- life cycle ----------------------------------------------------------------------------
@@ -305,5 +235,157 @@ class SequencePerturbation(Perturbation):
         return self.result(index, stream)
 
 
-def _jsonable(value: Any) -> Any:
-    return list(value) if isinstance(value, tuple) else value
+class Composite(Perturbation):
+    """An ordered chain of perturbation modules, each step seeing the previous step's output.
+
+    Built with ``>>`` (``night() >> fog(visibility_m=40)``) or ``sal_modules.create("composite",
+    steps=[...])``, which also takes module descriptions (``{"module": name, "params": {...}}``).
+    Every child parameter is addressable:
+
+    - ``"fog.visibility_m"``: by module name, when the name occurs once in the chain;
+    - ``"fog@1.visibility_m"``: by module name and step position, always;
+    - ``"visibility_m"``: the bare name, when exactly one step has that parameter.
+
+    ``sal_modules.perturb`` runs the chain step by step (so frame drops and whole-sequence steps
+    like ``bandwidth`` see exactly the frames earlier steps produced); ``apply`` here is the
+    per-frame chain for direct use.
+
+    Args:
+        steps: modules or module classes (their defaults), applied in order.
+    """
+
+    name = "composite"
+    version = 1
+    summary = "Ordered chain of modules; each step sees the previous step's output"
+
+    def __init__(self, steps: Iterable[Perturbation | type[Perturbation]] = ()):
+        self.steps: tuple[Perturbation, ...] = tuple(_flatten(steps))
+        if not self.steps:
+            raise ParameterError("composite: steps must name at least one module")
+        self._params = {}
+        self.context = None
+
+    @classmethod
+    def chain(cls, first: Perturbation | type[Perturbation], second: Perturbation | type[Perturbation]) -> Composite:
+        """``first >> second`` as one flat chain."""
+        return cls([first, second])
+
+    # -- addressing child parameters -----------------------------------------------------------
+    def addresses(self) -> dict[str, tuple[int, Param]]:
+        """Every address of every child parameter -> (step position, Param)."""
+        names = [step.name for step in self.steps]
+        per_param: dict[str, list[tuple[int, Param]]] = {}
+        found: dict[str, tuple[int, Param]] = {}
+        for position, step in enumerate(self.steps):
+            for key, spec in step.parameters().items():
+                found[f"{step.name}@{position}.{key}"] = (position, spec)
+                if names.count(step.name) == 1:
+                    found[f"{step.name}.{key}"] = (position, spec)
+                per_param.setdefault(key, []).append((position, spec))
+        for key, owners in per_param.items():
+            if len(owners) == 1:
+                found.setdefault(key, owners[0])
+        return found
+
+    def param(self, address: str) -> tuple[int, Param]:
+        """(step position, Param) of ``address``; ``ParameterError`` lists the valid addresses."""
+        known = self.addresses()
+        if address not in known:
+            plain = [a for a in known if "@" not in a]
+            raise ParameterError(
+                f"composite {self.label()} has no parameter {address!r}" + suggestion(address, plain or known, "addresses")
+            )
+        return known[address]
+
+    def __getattr__(self, name: str) -> ParamRef:
+        """``(night() >> fog).visibility_m``: a child parameter by bare name, for bounds."""
+        if name.startswith("_") or "steps" not in self.__dict__:
+            raise AttributeError(name)
+        try:
+            _, spec = self.param(name)
+        except ParameterError as exc:
+            raise AttributeError(str(exc)) from None
+        return ParamRef(self, name, spec)
+
+    def ref(self, address: str) -> ParamRef:
+        """A child parameter by any address (``fog.visibility_m``, ``fog@1.visibility_m``)."""
+        return ParamRef(self, address, self.param(address)[1])
+
+    @property
+    def params(self) -> dict[str, Any]:
+        """Child values by ``name@position.parameter``."""
+        return {f"{s.name}@{i}.{k}": v for i, s in enumerate(self.steps) for k, v in s.params.items()}
+
+    def with_params(self, **changes: Any) -> Composite:
+        """A copy with child parameters changed, by any address (``**{"fog.visibility_m": 30}``)."""
+        steps = list(self.steps)
+        for address, value in changes.items():
+            position, spec = self.param(address)
+            steps[position] = steps[position].with_params(**{spec.name: value})
+        return Composite(steps)
+
+    def label(self) -> str:
+        """``night>>fog``."""
+        return ">>".join(step.name for step in self.steps)
+
+    @classmethod
+    def describe(cls) -> dict[str, Any]:
+        info = super().describe()
+        info["parameters"] = [
+            {
+                "name": "steps",
+                "unit": "",
+                "default": [],
+                "min": None,
+                "max": None,
+                "domain": "list",
+                "searchable": False,
+                "worse": None,
+                "doc": "modules applied in order; child parameters by address (fog.visibility_m)",
+            }
+        ]
+        return info
+
+    # -- JSON ----------------------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        return {"module": self.name, "version": self.version, "steps": [step.to_dict() for step in self.steps]}
+
+    def __repr__(self) -> str:
+        return " >> ".join(repr(step) for step in self.steps)
+
+    # -- life cycle ----------------------------------------------------------------------------
+    def setup(self, context: ModuleContext) -> None:
+        self.context = context
+        for step in self.steps:
+            step.setup(context)
+
+    def apply(self, image: np.ndarray, depth: np.ndarray | None, index: int, stream: str) -> np.ndarray | None:
+        for step in self.steps:
+            if not step.keep_frame(index):
+                return None
+            out = step.apply(image, depth if step.needs_depth else None, index, stream)
+            if out is None:
+                return None
+            image = out
+        return image
+
+    def keep_frame(self, index: int) -> bool:
+        return all(step.keep_frame(index) for step in self.steps)
+
+    def cleanup(self) -> None:
+        for step in self.steps:
+            step.cleanup()
+        self.context = None
+
+
+def _flatten(steps: Iterable[Perturbation | type[Perturbation]]) -> list[Perturbation]:
+    flat: list[Perturbation] = []
+    for step in steps:
+        if isinstance(step, type) and issubclass(step, Perturbation):
+            step = step()
+        if not isinstance(step, Perturbation):
+            raise ParameterError(
+                f"composite: a step must be a module, a module class or (through create / from_dict) a module description, got {step!r}"
+            )
+        flat.extend(step.steps if isinstance(step, Composite) else [step])
+    return flat

@@ -17,12 +17,11 @@ import numbers
 import reprlib
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Literal
+from typing import Any, Literal
 
+from sal_adapters.json_values import json_safe
 from sal_modules.errors import ParameterError
-
-if TYPE_CHECKING:
-    from sal_modules.param_refs import Bound, ParamRef
+from sal_modules.param_refs import Bound, ParamRef
 
 __all__ = ["Domain", "Param", "SearchScale", "Worse"]
 
@@ -139,8 +138,6 @@ class Param:
     # -- bounds: ``fog.visibility_m >= 25`` (the requirement language reads them) -------------
     def ref(self) -> ParamRef:
         """This parameter of its module class as a ``ParamRef``."""
-        from sal_modules.param_refs import ParamRef
-
         return ParamRef(self.owner, self.name, self)
 
     def __ge__(self, value: Any) -> Bound:
@@ -187,7 +184,7 @@ class Param:
         info: dict[str, Any] = {
             "name": self.name,
             "unit": self.unit,
-            "default": list(self.default) if isinstance(self.default, tuple) else self.default,
+            "default": json_safe(self.default),
             "min": self.min,
             "max": self.max,
             "domain": self.domain,

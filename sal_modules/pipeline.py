@@ -14,13 +14,14 @@ from collections.abc import Iterable
 from functools import partial
 from pathlib import Path
 from threading import RLock
+from typing import cast
 
 import cv2
 import numpy as np
 
 from sal_adapters.sequence import Frame, FrameRecord, Sequence
-from sal_modules.base import STREAMS, ModuleContext, Perturbation, SequencePerturbation
-from sal_modules.chain import Composite
+from sal_modules.base import Composite, Perturbation, SequencePerturbation
+from sal_modules.context import STREAMS, ModuleContext
 from sal_modules.depth import DepthProvider, select_depth_provider
 from sal_modules.errors import ModuleError
 
@@ -30,9 +31,12 @@ __all__ = ["chain_of", "perturb"]
 def chain_of(modules: Perturbation | type[Perturbation] | Iterable[Perturbation | type[Perturbation]]) -> Composite:
     """``modules`` (one module, a class, a composite or a list) as one flat composite of fresh
     copies, so a module object can be reused across sequences."""
+    steps: Iterable[Perturbation | type[Perturbation]]
     if isinstance(modules, (Perturbation, type)):
-        modules = [modules]
-    return Composite([type(m)(**m.params) if isinstance(m, Perturbation) and not isinstance(m, Composite) else m for m in modules])
+        steps = [modules]
+    else:  # a list or other iterable: mypy cannot rule out a module, whose __getattr__ might answer __iter__
+        steps = cast(Iterable[Perturbation | type[Perturbation]], modules)
+    return Composite([type(m)(**m.params) if isinstance(m, Perturbation) and not isinstance(m, Composite) else m for m in steps])
 
 
 def perturb(

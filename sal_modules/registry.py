@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping
 from typing import Any
 
 from sal_adapters.plugins import EntryPointRegistry
-from sal_modules.base import Perturbation
+from sal_modules.base import Composite, Perturbation
 from sal_modules.errors import ParameterError
 
 __all__ = ["PERTURBATIONS", "create", "from_dict", "from_json", "module_class"]
@@ -25,8 +26,12 @@ def module_class(name: str) -> type[Perturbation]:
 
 def create(name: str, **params: Any) -> Perturbation:
     """Build module ``name`` with ``params`` (validated: a wrong name or value raises one
-    ``ParameterError`` naming module, parameter, unit and valid range)."""
-    return module_class(name)(**params)
+    ``ParameterError`` naming module, parameter, unit and valid range). The ``steps`` of a
+    composite may be modules, module classes or module descriptions (``from_dict`` input)."""
+    cls = module_class(name)
+    if issubclass(cls, Composite) and "steps" in params:
+        params["steps"] = [from_dict(step) if isinstance(step, Mapping) else step for step in params["steps"]]
+    return cls(**params)
 
 
 def from_dict(data: Mapping[str, Any]) -> Perturbation:
@@ -49,6 +54,4 @@ def from_dict(data: Mapping[str, Any]) -> Perturbation:
 
 def from_json(text: str) -> Perturbation:
     """``from_dict`` of a JSON string."""
-    import json
-
     return from_dict(json.loads(text))

@@ -149,6 +149,8 @@ def _feed(
     """Stream the messages into the child and wait for it; ``(exit status, timed out, error
     producing a frame)``. The child's process group is killed when it timed out, when a frame
     could not be produced, and whatever is left of it when the child exits."""
+    stdin = process.stdin
+    assert stdin is not None  # started with stdin=PIPE
     timed_out = threading.Event()
 
     def kill() -> None:
@@ -161,11 +163,10 @@ def _feed(
         watchdog.start()
     feed_error: BaseException | None = None
     try:
-        assert process.stdin is not None
         try:
             for message in _messages(header, frames):
-                pickle.dump(message, process.stdin, protocol=pickle.HIGHEST_PROTOCOL)
-            process.stdin.close()
+                pickle.dump(message, stdin, protocol=pickle.HIGHEST_PROTOCOL)
+            stdin.close()
         except (BrokenPipeError, OSError):
             pass  # the child died or closed its input: its exit status says why
         except BaseException as exc:  # producing a frame failed (bad image): stop the child
@@ -176,7 +177,7 @@ def _feed(
         if watchdog:
             watchdog.cancel()
         try:
-            process.stdin.close()  # also when the child died mid-stream (no leaked pipe)
+            stdin.close()  # also when the child died mid-stream (no leaked pipe)
         except OSError:
             pass
         _kill(process)  # before reaping: the group id stays reserved until then

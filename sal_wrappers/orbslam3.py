@@ -9,19 +9,7 @@ C++ output goes to ``workdir/orbslam3.log``. The parent writes the settings file
 sequence's camera (``sal_wrappers.orbslam3_settings``), streams grey frames to the child and
 turns what the child recorded into a ``RunResult``.
 
-Tracking states (ORB-SLAM3 ``TrackingState`` -> ``TrackState``):
-
-* every state before the first ``OK`` frame -> ``NOT_INITIALISED``;
-* ``OK`` (and ``OK_KLT``) -> ``OK``;
-* after the first ``OK``: ``RECENTLY_LOST`` and ``LOST`` -> ``LOST``, and ``NOT_INITIALIZED``,
-  ``NO_IMAGES_YET``, ``SYSTEM_NOT_READY`` -> ``LOST`` too: ORB-SLAM3 reports them after it
-  reset the map it lost, so the system had a map and lost it. Frames the child never reported
-  on (it crashed or timed out first) follow the same rule.
-
-Map segments: a new segment starts at the first ``OK`` frame after a frame whose ORB-SLAM3
-state was ``LOST``, ``NOT_INITIALIZED``, ``NO_IMAGES_YET`` or ``SYSTEM_NOT_READY`` (a new or
-reset map, with its own origin and, in monocular, its own scale). ``RECENTLY_LOST`` frames
-that come back to ``OK`` (relocalised in the same map) stay in their segment. ``maps`` counts
+Tracking states and map segments follow ``sal_wrappers.orbslam3_states``. ``maps`` counts
 the segments; the scored ``trajectory`` (``scored="online"``) holds the per-frame ``pose_wc``
 of the ``OK`` frames of the largest segment (most ``OK`` frames, the earlier one on a tie).
 ``final_trajectory`` is ORB-SLAM3's own ``save_trajectory_euroc()`` after ``shutdown()``
@@ -51,105 +39,33 @@ says so too). Earlier attempts' logs are kept as ``orbslam3.attempt<N>.log``.
 from __future__ import annotations
 
 import dataclasses
+import importlib.metadata
 import importlib.util
 import math
 import os
-import time
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from sal_adapters import Sequence, Trajectory
-from sal_wrappers.base import WRITTEN_BEFORE_FAILURE, RunResult, SlamSystem, SlamSystemError, TrackState
-from sal_wrappers.child_process import ChildOutcome, run_child, write_result
+from sal_adapters.cache_dir import user_cache_dir
+from sal_wrappers.base import WRITTEN_BEFORE_FAILURE, RunResult, SlamSystem, SlamSystemError, file_sha256
+from sal_wrappers.child_process import ChildOutcome, run_child
+from sal_wrappers.orbslam3_child import ENTRY, frame_messages
 from sal_wrappers.orbslam3_settings import OrbParameters, write_settings
-from sal_wrappers.pacing import load_figures, process_usage, repace
+from sal_wrappers.orbslam3_states import map_states, read_final_trajectory, segment_ids, state_name
+from sal_wrappers.pacing import load_figures, repace
 from sal_wrappers.prefetch import prefetched
 
-__all__ = ["ORB_STATES", "OrbSlam3", "map_states", "read_final_trajectory", "segment_ids"]
+__all__ = ["OrbSlam3"]
 
-#: ORB-SLAM3 ``TrackingState`` values by name (pyorbslam3 0.1.1).
-ORB_STATES: dict[str, int] = {
-    "SYSTEM_NOT_READY": -1,
-    "NO_IMAGES_YET": 0,
-    "NOT_INITIALIZED": 1,
-    "OK": 2,
-    "RECENTLY_LOST": 3,
-    "LOST": 4,
-    "OK_KLT": 5,
-}
-_OK = {ORB_STATES["OK"], ORB_STATES["OK_KLT"]}
-_RECENTLY_LOST = ORB_STATES["RECENTLY_LOST"]
-_NAMES = {v: k for k, v in ORB_STATES.items()}
-_SENSORS = {"mono": "MONOCULAR", "stereo": "STEREO", "rgbd": "RGBD"}
 _PHASES = {
     "loading": "while loading the vocabulary and settings",
     "tracking": "while tracking",
     "shutdown": "while shutting down",
     "saving": "while saving the final trajectory",
 }
-#: Seconds between two writes of the child's per-frame records while tracking.
-_FLUSH_INTERVAL_S = 1.0
-
-
-def map_states(raw: list[int | None]) -> np.ndarray:
-    """``TrackState`` per frame (int8) from ORB-SLAM3 states (``None``: not reported); see the
-    module text for the rule."""
-    out = np.empty(len(raw), dtype=np.int8)
-    tracked = False
-    for i, state in enumerate(raw):
-        if state in _OK:
-            tracked = True
-            out[i] = TrackState.OK
-        else:
-            out[i] = TrackState.LOST if tracked else TrackState.NOT_INITIALISED
-    return out
-
-
-def segment_ids(raw: list[int | None]) -> np.ndarray:
-    """Map segment (0, 1, ...) of every ``OK`` frame, -1 for the others; see the module text."""
-    ids = np.full(len(raw), -1, dtype=np.int64)
-    segment, broken = -1, True
-    for i, state in enumerate(raw):
-        if state in _OK:
-            if broken:
-                segment, broken = segment + 1, False
-            ids[i] = segment
-        elif state != _RECENTLY_LOST:
-            broken = True
-    return ids
-
-
-def read_final_trajectory(path: Path, frame_times: np.ndarray, tolerance_s: float = 1e-3) -> Trajectory:
-    """Read ORB-SLAM3's ``save_trajectory_euroc`` file and put its times on the frames' times.
-
-    The file has one line per frame, space-separated: ``1e9 * t`` (ns, printed with 6
-    decimals; a float64, so absolute EuRoC times are off by up to 256 ns), ``tx ty tz`` (m) and
-    ``qx qy qz qw`` (Hamilton, x y z w: TUM order, not EuRoC's w-first). Each time is replaced
-    by the nearest frame time when that is within ``tolerance_s`` (s).
-    """
-    rows = []
-    for line in Path(path).read_text().splitlines():
-        fields = line.split()
-        if not fields or fields[0].startswith("#"):
-            continue
-        if len(fields) != 8:
-            raise ValueError(f"{path}: expected 8 values per line (t [ns], tx ty tz, qx qy qz qw), got {len(fields)}")
-        rows.append([float(v) for v in fields])
-    if not rows:
-        raise ValueError(f"{path}: no poses")
-    table = np.asarray(rows)
-    times = table[:, 0] * 1e-9
-    frame_times = np.sort(np.asarray(frame_times, dtype=np.float64))
-    if len(frame_times):
-        pos = np.clip(np.searchsorted(frame_times, times), 1, max(1, len(frame_times) - 1))
-        lo = frame_times[np.maximum(pos - 1, 0)]
-        hi = frame_times[np.minimum(pos, len(frame_times) - 1)]
-        nearest = np.where(np.abs(times - lo) <= np.abs(hi - times), lo, hi)
-        times = np.where(np.abs(nearest - times) <= tolerance_s, nearest, times)
-    return Trajectory(times, table[:, 1:4], table[:, 4:8])
 
 
 def _check_int(name: str, value: Any, low: int, high: int) -> int:
@@ -267,11 +183,6 @@ class OrbSlam3(SlamSystem):
         """``SlamSystem.identity`` plus the installed pyorbslam3 version and the SHA-256 of the
         vocabulary and of a given settings file (hashed once per file version in a process:
         the 145 MB ORBvoc.txt takes about 0.1 s)."""
-        import importlib.metadata
-        import os
-
-        from sal_adapters.cache_dir import user_cache_dir
-        from sal_wrappers.base import file_sha256
         from sal_wrappers.vocabulary import BUILDER_VERSION, ENV_VARIABLE
 
         try:
@@ -325,7 +236,7 @@ class OrbSlam3(SlamSystem):
             settings = str(write_settings(workdir / "orbslam3_settings.yaml", sequence.camera, mode, sequence.fps, params))
         final_path = workdir / "final_trajectory_euroc.txt"
         final_path.unlink(missing_ok=True)
-        header = {
+        header: dict[str, Any] = {
             "vocabulary": vocabulary,
             "settings": settings,
             "sensor": mode,
@@ -336,9 +247,7 @@ class OrbSlam3(SlamSystem):
             header["stall_s"] = float(self._stall_s)
         attempts: list[dict[str, Any]] = []
         while True:
-            outcome = run_child(
-                "sal_wrappers.orbslam3:_track", header, prefetched(_frames(sequence, mode)), workdir, timeout, log_name="orbslam3.log"
-            )
+            outcome = run_child(ENTRY, header, prefetched(frame_messages(sequence, mode)), workdir, timeout, log_name="orbslam3.log")
             result = self._result(sequence, mode, outcome, header, final_path)
             attempts.append(_attempt(result))
             load = result.load
@@ -354,22 +263,13 @@ class OrbSlam3(SlamSystem):
         return dataclasses.replace(result, fell_behind=fell_behind, failure=failure, info={**result.info, "attempts": attempts})
 
     def _result(self, sequence: Sequence, mode: str, outcome: ChildOutcome, header: dict[str, Any], final_path: Path) -> RunResult:
+        """The ``RunResult`` of one child run from the record it left (see the module text)."""
         data = outcome.result or {}
         timestamps = sequence.timestamps
         n = len(timestamps)
         reported: list[int] = [int(s) for s in data.get("raw_states", [])][:n]
         raw: list[int | None] = [*reported, *([None] * (n - len(reported)))]
-        states = map_states(raw)
-        ids = segment_ids(raw)
-        poses = data.get("poses", [])
-        maps = int(ids.max()) + 1 if n and ids.max() >= 0 else 0
-        sizes = [int(np.count_nonzero(ids == k)) for k in range(maps)]
-        trajectory = None
-        if maps:
-            best = int(np.argmax(sizes))  # first of the largest
-            keep = np.flatnonzero(ids == best)
-            matrices = np.array([np.asarray(poses[i], dtype=np.float64).reshape(4, 4) for i in keep])
-            trajectory = Trajectory.from_matrices(timestamps[keep], matrices)
+        trajectory, sizes = _largest_segment(segment_ids(raw), data.get("poses", []), timestamps)
         final, final_error = None, None
         if self.keep_final and data.get("final_saved"):
             try:
@@ -377,25 +277,13 @@ class OrbSlam3(SlamSystem):
             except (OSError, ValueError) as exc:
                 final_error = str(exc)
         phase = data.get("phase")
-        failure = outcome.failure
-        partial = failure is not None and bool(reported)
-        if failure is None and trajectory is None:
-            failure = f"never initialised: no frame of {n} was tracked"  # the child ran to the end
-        # a crash after the last frame (shutting down, saving the final map) leaves every frame's result
-        written = partial and phase in ("shutdown", "saving") and len(reported) == n and not outcome.timed_out
-        if failure is not None:
-            if phase in _PHASES:
-                failure += f" {_PHASES[phase]}"
-            if written:
-                failure += f"; the per-frame results of all {n} frames are kept and scored"
-            elif partial:
-                failure += f"; the per-frame results of {len(reported)} of {n} frames are kept"
+        failure, partial, written = _failure(outcome, phase, len(reported), n, trajectory is not None)
         track_times = np.asarray(data.get("track_times", []), dtype=np.float64)
         given = np.asarray(data.get("given", []), dtype=np.float64)
         load = load_figures(timestamps[: len(given)], given, track_times, header.get("pace"), data.get("usage")) if len(given) else {}
         counts: dict[str, int] = {}
         for s in reported:
-            counts[_NAMES.get(s, str(s))] = counts.get(_NAMES.get(s, str(s)), 0) + 1
+            counts[state_name(s)] = counts.get(state_name(s), 0) + 1
         info: dict[str, Any] = {
             "settings": header["settings"],
             "settings_generated": self.settings is None,
@@ -422,11 +310,11 @@ class OrbSlam3(SlamSystem):
             sequence=sequence.name,
             sensor=mode,
             timestamps=timestamps,
-            states=states,
+            states=map_states(raw),
             trajectory=trajectory,
             scored="online",
             final_trajectory=final,
-            maps=maps,
+            maps=len(sizes),
             wall_time_s=float(outcome.wall_time_s),
             track_time_s=float(track_times.sum()) if len(track_times) else None,
             exit_status=outcome.exit_status,
@@ -437,6 +325,38 @@ class OrbSlam3(SlamSystem):
             load=load,
             fell_behind=bool(load.get("fell_behind")),
         )
+
+
+def _largest_segment(ids: np.ndarray, poses: list[Any], timestamps: np.ndarray) -> tuple[Trajectory | None, list[int]]:
+    """The ``pose_wc`` trajectory of the largest map segment (the earlier one on a tie; ``None``
+    when no frame was tracked) and the number of frames of each segment."""
+    maps = int(ids.max()) + 1 if len(ids) and ids.max() >= 0 else 0
+    sizes = [int(np.count_nonzero(ids == k)) for k in range(maps)]
+    if not maps:
+        return None, sizes
+    keep = np.flatnonzero(ids == int(np.argmax(sizes)))  # first of the largest
+    matrices = np.array([np.asarray(poses[i], dtype=np.float64).reshape(4, 4) for i in keep])
+    return Trajectory.from_matrices(timestamps[keep], matrices), sizes
+
+
+def _failure(outcome: ChildOutcome, phase: str | None, reported: int, n: int, tracked: bool) -> tuple[str | None, bool, bool]:
+    """``(failure, partial, written)``: how the run failed in words, with the phase it failed
+    in and what was kept; whether per-frame results of an unfinished child are kept
+    (``partial``); whether they cover every frame of a crash after the last one (``written``)."""
+    failure = outcome.failure
+    partial = failure is not None and reported > 0
+    if failure is None and not tracked:
+        failure = f"never initialised: no frame of {n} was tracked"  # the child ran to the end
+    # a crash after the last frame (shutting down, saving the final map) leaves every frame's result
+    written = partial and phase in ("shutdown", "saving") and reported == n and not outcome.timed_out
+    if failure is not None:
+        if phase in _PHASES:
+            failure += f" {_PHASES[phase]}"
+        if written:
+            failure += f"; the per-frame results of all {n} frames are kept and scored"
+        elif partial:
+            failure += f"; the per-frame results of {reported} of {n} frames are kept"
+    return failure, partial, written
 
 
 def _attempt(result: RunResult) -> dict[str, Any]:
@@ -451,107 +371,3 @@ def _attempt(result: RunResult) -> dict[str, Any]:
         "fell_behind": bool(result.load.get("fell_behind")),
         "load": result.load,
     }
-
-
-def _grey(image: np.ndarray) -> np.ndarray:
-    import cv2
-
-    if image.ndim == 2:
-        return np.ascontiguousarray(image, dtype=np.uint8)
-    return cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)
-
-
-def _frames(sequence: Sequence, mode: str) -> Iterator[dict[str, Any]]:
-    """The messages for the child: time (s), grey left image, grey right image (stereo) and
-    float32 depth in metres with 0 where unknown (RGB-D)."""
-    for frame in sequence:
-        message: dict[str, Any] = {"timestamp": float(frame.timestamp), "image": _grey(frame.image)}
-        if mode == "stereo":
-            message["right"] = _grey(frame.right)
-        elif mode == "rgbd":
-            depth = np.asarray(frame.depth, dtype=np.float32)
-            message["depth"] = np.where(np.isfinite(depth) & (depth > 0), depth, np.float32(0.0))
-        yield message
-
-
-def _track(header: dict[str, Any], frames: Iterator[dict[str, Any]], result_path: Path) -> None:
-    """Child-process entry point: build ``pyorbslam3.Slam``, track every frame (paced), then
-    shut down and save the final trajectory; writes the per-frame records to ``result_path``
-    before each step that may crash."""
-    import pyorbslam3
-
-    record: dict[str, Any] = {
-        "phase": "loading",
-        "raw_states": [],
-        "poses": [],
-        "track_times": [],
-        "given": [],
-        "points": [],
-        "final_saved": False,
-    }
-    write_result(result_path, record)
-    start = time.perf_counter()
-    sensor = getattr(pyorbslam3.Sensor, _SENSORS[header["sensor"]])
-    slam = pyorbslam3.Slam(header["vocabulary"], header["settings"], sensor, use_viewer=False)
-    record["load_time_s"] = time.perf_counter() - start
-    record["phase"] = "tracking"
-    write_result(result_path, record)
-    pace = header.get("pace")
-    mode = header["sensor"]
-    stall = float(header.get("stall_s") or 0.0)
-    previous: tuple[float, float] | None = None  # (frame time, wall time it was given)
-    before, loadavg_start = process_usage(), [round(v, 2) for v in os.getloadavg()]
-
-    def usage() -> dict[str, Any]:
-        """CPU time (s) and involuntary switches of the loop so far, load averages, cores."""
-        now = process_usage()
-        return {
-            "cpu_s": round(now["cpu_s"] - before["cpu_s"], 3),
-            "child_cpu_s": round(now["cpu_s"], 3),
-            "loop_wall_s": round(time.perf_counter() - loop_start, 3),
-            "involuntary_switches": int(now["involuntary_switches"] - before["involuntary_switches"]),
-            "loadavg_start": loadavg_start,
-            "loadavg_end": [round(v, 2) for v in os.getloadavg()],
-            "cpus": os.cpu_count(),
-        }
-
-    last_flush = loop_start = time.perf_counter()
-    for frame in frames:
-        t = float(frame["timestamp"])
-        if pace and previous is not None:
-            delay = previous[1] + (t - previous[0]) / pace - time.perf_counter()
-            if delay > 0:
-                time.sleep(delay)
-        given = time.perf_counter()
-        if mode == "stereo":
-            result = slam.track_stereo(frame["image"], frame["right"], t)
-        elif mode == "rgbd":
-            result = slam.track_rgbd(frame["image"], frame["depth"], t)
-        else:
-            result = slam.track_monocular(frame["image"], t)
-        record["track_times"].append(time.perf_counter() - given)
-        record["given"].append(given - loop_start)
-        previous = (t, given)
-        if stall:
-            time.sleep(stall)
-        state = int(result.state)
-        record["raw_states"].append(state)
-        record["poses"].append(np.asarray(result.pose_wc, dtype=np.float64).ravel().tolist() if state in _OK else None)
-        record["points"].append(int(result.num_tracked_points))
-        if time.perf_counter() - last_flush > _FLUSH_INTERVAL_S:
-            record["usage"] = usage()
-            write_result(result_path, record)
-            last_flush = time.perf_counter()
-    record["loop_time_s"] = time.perf_counter() - loop_start  # tracking and waiting for the sensor clock
-    record["usage"] = usage()
-    record["phase"] = "shutdown"
-    write_result(result_path, record)
-    slam.shutdown()
-    final_path = header.get("final_path")
-    if final_path and any(s in _OK for s in record["raw_states"]):
-        record["phase"] = "saving"
-        write_result(result_path, record)
-        slam.save_trajectory_euroc(str(final_path))
-        record["final_saved"] = Path(final_path).is_file()
-    record["phase"] = "done"
-    write_result(result_path, record)

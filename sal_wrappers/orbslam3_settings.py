@@ -168,6 +168,7 @@ def settings_entries(camera: Camera, mode: str, fps: float, params: OrbParameter
         T = camera.T_lr
         if T is None:
             raise ValueError("stereo settings need the camera's T_lr (pose of the right camera in the left one)")
+        right_in_left = Matrix(T)
         entries += _camera_block("Camera2", camera.right or camera)
     entries += [
         ("Camera.width", int(camera.width)),
@@ -176,7 +177,7 @@ def settings_entries(camera: Camera, mode: str, fps: float, params: OrbParameter
         ("Camera.RGB", 1),
     ]
     if mode == "stereo":
-        entries += [("Stereo.ThDepth", float(params.th_depth)), ("Stereo.T_c1_c2", Matrix(camera.T_lr))]
+        entries += [("Stereo.ThDepth", float(params.th_depth)), ("Stereo.T_c1_c2", right_in_left)]
     elif mode == "rgbd":
         baseline = camera.baseline_m if camera.baseline_m else DEFAULT_RGBD_BASELINE_M
         entries += [

@@ -17,7 +17,17 @@ from sal_adapters.textfiles import read_numeric_table, read_rows
 from sal_adapters.trajectory import read_times
 from sal_wrappers.base import TrackState
 
-__all__ = ["OUTPUT_FORMATS", "TIME_UNITS", "find_output", "frame_states", "no_match_message", "read_output", "snapshot", "written_since"]
+__all__ = [
+    "OUTPUT_FORMATS",
+    "TIME_UNITS",
+    "Stamp",
+    "find_output",
+    "frame_states",
+    "no_match_message",
+    "read_output",
+    "snapshot",
+    "written_since",
+]
 
 OUTPUT_FORMATS = ("tum", "kitti", "euroc", "json")
 #: seconds per unit of the times in the output

@@ -20,13 +20,13 @@ import numpy as np
 import pytest
 
 from pytest_sal.cli.main import main
+from pytest_sal.store.byte_sizes import parse_size
 from pytest_sal.store.cache_keys import cache_key
 from pytest_sal.store.trial_cache import (
     CacheError,
     CacheWarning,
     ContentCache,
     default_cache_dir,
-    parse_size,
 )
 from sal_adapters import SalError, open_dataset, write_sequence
 

@@ -677,13 +677,13 @@ def test_a_depends_file_removed_after_creation_is_a_clear_error(tmp_path):
 
 
 def test_a_too_big_depends_folder_is_a_clear_error(tmp_path, monkeypatch):
-    import sal_wrappers.external_program as command
+    import sal_wrappers.command_files as command_files
 
     lib = tmp_path / "lib"
     lib.mkdir()
     for i in range(3):
         (lib / f"m{i}.py").write_text("x\n")
-    monkeypatch.setattr(command, "DEPENDS_MAX_FILES", 2)
+    monkeypatch.setattr(command_files, "DEPENDS_MAX_FILES", 2)
     with pytest.raises(SlamSystemError, match="depends folder .* holds more than 2 files"):
         create("command", argv=["slam"], depends=[str(lib)]).identity()
 

@@ -33,7 +33,8 @@ from sal_modules.depth import (
     left_depth_to_right,
     select_depth_provider,
 )
-from sal_modules.depth.stereo import fill_unmeasurable, stereo_rig
+from sal_modules.depth.stereo_fill import fill_unmeasurable
+from sal_modules.depth.stereo_rig import stereo_rig
 from sal_modules.errors import DepthUnavailable, ModuleError
 
 

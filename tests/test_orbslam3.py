@@ -39,7 +39,7 @@ from sal_adapters.datasets import open_dataset
 from sal_wrappers import RunResult, SlamSystemError, TrackState, create
 from sal_wrappers import orbslam3 as orbslam3_module
 from sal_wrappers.child_process import ChildOutcome
-from sal_wrappers.orbslam3 import ORB_STATES, OrbSlam3, map_states, read_final_trajectory, segment_ids
+from sal_wrappers.orbslam3 import OrbSlam3
 from sal_wrappers.orbslam3_settings import (
     VIEWER_KEYS,
     Matrix,
@@ -49,6 +49,7 @@ from sal_wrappers.orbslam3_settings import (
     settings_yaml,
     write_settings,
 )
+from sal_wrappers.orbslam3_states import ORB_STATES, map_states, read_final_trajectory, segment_ids
 from sal_wrappers.pacing import repace
 
 OK, RL, LOST = ORB_STATES["OK"], ORB_STATES["RECENTLY_LOST"], ORB_STATES["LOST"]

@@ -73,7 +73,7 @@ def add_module_commands(commands: argparse._SubParsersAction) -> None:
 
 def build_chain(spec: str, params: dict[str, Any]) -> Perturbation:
     """``"fog"`` or ``"night>>fog"`` with ``params`` (chain parameters by address)."""
-    from sal_modules.chain import Composite
+    from sal_modules.base import Composite
     from sal_modules.registry import create, module_class
 
     names = [name.strip() for name in spec.split(">>")]

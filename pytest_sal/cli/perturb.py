@@ -20,7 +20,7 @@ __all__ = ["add_experiment_commands"]
 
 
 def _describe(module: Perturbation | None) -> str:
-    from sal_modules.chain import Composite
+    from sal_modules.base import Composite
 
     if module is None:
         return "clean sequence"
@@ -69,7 +69,7 @@ def _print_plan(plan: PerturbPlan) -> None:
 
 def _print_timings(plan: PerturbPlan, results: dict[str, Any]) -> None:
     """One row per perturbation written: module, frames kept, ms per frame, seconds."""
-    from sal_modules.chain import Composite
+    from sal_modules.base import Composite
 
     labels = {
         name: "none" if module is None else (module.label() if isinstance(module, Composite) else module.name)

@@ -72,13 +72,8 @@ def parse_source(text: str) -> tuple[str, Path | None]:
 def _run_build(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from sal_wrappers.vocabulary import (
-        build_vocabulary,
-        check_tree_shape,
-        orb_image_descriptors,
-        sequence_images,
-        synthetic_training_images,
-    )
+    from sal_wrappers.vocabulary import orb_image_descriptors, sequence_images, synthetic_training_images
+    from sal_wrappers.vocabulary_training import build_vocabulary, check_tree_shape
 
     check_tree_shape(args.k, args.levels)
     if args.levels < 5:

@@ -81,7 +81,7 @@ def _target(checks: ValueChecks, value: Any, perturbations: tuple[PerturbationCo
 def _searched_parameter(checks: ValueChecks, target: PerturbationConfig, parameter: str) -> tuple[Param, str]:
     """(the declared parameter, the name of the module owning it) of ``parameter`` in
     ``target``: a searchable parameter of its module, or of a composite's step by address."""
-    from sal_modules.chain import Composite
+    from sal_modules.base import Composite
 
     module = build_module(target)
     assert module is not None

@@ -40,6 +40,7 @@ from pytest_sal.experiment.evaluate_plots import aggregated_plot, run_plots, try
 from pytest_sal.experiment.schema import BASELINE, ExperimentConfig
 from sal_adapters.atomic import Replacement
 from sal_adapters.errors import SalError
+from sal_adapters.json_values import json_safe
 from sal_adapters.textfiles import atomic_write_text
 
 if TYPE_CHECKING:  # numpy and scipy load when a command runs, not for `sal --help`
@@ -190,7 +191,7 @@ def _baseline_trajectory(root: Path, k: int) -> Trajectory | None:
 
 
 def _ate_record(metrics: Any, result: Any, k: int, seconds: float) -> dict[str, Any]:
-    record = {"run": k, **_clean(metrics.to_dict())}
+    record = {"run": k, **json_safe(metrics.to_dict())}
     a = metrics.ate
     record["alignment"] = {
         "method": metrics.align,
@@ -245,7 +246,7 @@ def _vs_baseline(p: Any, b: Any, result: Any, *, baseline_traj: Trajectory | Non
                 same["ate_rmse"] = ate(baseline_traj.select(keep), groundtruth, align=b.align, max_diff=tol).rmse
             except SalError as exc:
                 same["reason"] = f"not scored: {exc}"
-    return _clean(
+    return json_safe(
         {
             "perturbed_ok": p.failure is None,
             "baseline_ok": b.failure is None,
@@ -310,7 +311,7 @@ def _summary(all_metrics: dict[str, list[Any]], slam: str, system: Any, config: 
         entries[name] = entry
     return {
         "system": slam,
-        "options": _clean(system.options()),
+        "options": json_safe(system.options()),
         "experiment": config.experiment.name,
         "sequence": clean.name,
         "frames": len(clean),
@@ -324,25 +325,7 @@ def _summary(all_metrics: dict[str, list[Any]], slam: str, system: Any, config: 
 
 
 # -- files ----------------------------------------------------------------------------------------
-def _clean(value: Any) -> Any:
-    """JSON-ready: numpy scalars to Python, non-finite floats to ``None``, paths to text."""
-    import numpy as np
-
-    if isinstance(value, dict):
-        return {str(k): _clean(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_clean(v) for v in value]
-    if isinstance(value, (np.integer,)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        f = float(value)
-        return f if math.isfinite(f) else None
-    if isinstance(value, Path):
-        return str(value)
-    return value
-
-
 def _write_json(path: Path, data: dict[str, Any]) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    text = json.dumps(_clean(data), indent=2) + "\n"
+    text = json.dumps(json_safe(data), indent=2) + "\n"
     atomic_write_text(path, text)

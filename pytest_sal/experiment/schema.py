@@ -190,7 +190,7 @@ MAX_KITTI_SEGMENTS = 100
 
 def build_module(pert: PerturbationConfig) -> Perturbation | None:
     """The module of one perturbation (``None`` for type none)."""
-    from sal_modules.chain import Composite
+    from sal_modules.base import Composite
     from sal_modules.registry import module_class
 
     if pert.type == "none":

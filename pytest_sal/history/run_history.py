@@ -24,7 +24,6 @@ record, or add it to ``.gitignore`` to keep it per machine.
 from __future__ import annotations
 
 import json
-import math
 import re
 import warnings
 from collections.abc import Sequence
@@ -36,6 +35,7 @@ from typing import Any
 from pytest_sal.engine.outcome import Outcome
 from pytest_sal.history.provenance import commit_info, machine_info
 from sal_adapters.errors import SalError
+from sal_adapters.json_values import json_safe
 from sal_adapters.textfiles import atomic_write_text
 
 __all__ = [
@@ -159,7 +159,7 @@ class History:
             "name": name,
             "outcomes": records,
         }
-        text = json.dumps(_json_safe(document), indent=2, allow_nan=False) + "\n"
+        text = json.dumps(json_safe(document), indent=2, allow_nan=False) + "\n"
         self.root.mkdir(parents=True, exist_ok=True)
         number = self._reserve_number()
         stem = f"{number:04d}_{commit or 'nogit'}{'-dirty' if dirty else ''}_{now:%Y%m%dT%H%M%SZ}"
@@ -332,21 +332,3 @@ def _readable_outcomes(path: Path, stored: list[Any]) -> list[Outcome]:
 
 def _safe_name(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9._-]+", "-", name).strip("-") or "run"
-
-
-def _json_safe(value: Any) -> Any:
-    """Plain JSON: numpy scalars and arrays as Python values, paths as text, NaN and
-    infinities as ``null`` (a metric that is not a number counts as not available)."""
-    if isinstance(value, dict):
-        return {str(k): _json_safe(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_safe(v) for v in value]
-    if isinstance(value, bool) or value is None or isinstance(value, (str, int)):
-        return value
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, Path):
-        return str(value)
-    if hasattr(value, "tolist"):  # numpy scalar or array
-        return _json_safe(value.tolist())
-    raise TypeError(f"cannot save {type(value).__name__} {value!r} in the run history")

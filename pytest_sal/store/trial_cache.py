@@ -8,22 +8,16 @@ number of runs. :class:`ContentCache` stores one JSON-ready dict (a trial result
 computed once, also when two pytest-xdist workers ask for it at the same moment, and a second
 identical run of a suite does not run SLAM at all.
 
-Layout under the cache root (default ``.sal/cache`` under the pytest rootdir)::
-
-    .gitignore                 "*", written when the folder is first created
-    locks/<key>.lock           flock(2) lock of a key, present only while someone holds it
-    ab/abcdef....json          a result entry (shard = first two hex digits of the key)
-    ab/abcdef.../manifest.json a folder entry: the size and SHA-256 of every file in data/,
-    ab/abcdef.../data/         and the files (the folder ``compute_dir`` returns)
-    ab/.tmp-<key>-...          a write in progress (or left by a killed process; removed later)
+Under the cache root (default ``.sal/cache`` under the pytest rootdir) a ``.gitignore`` of
+``*`` is written when the folder is first created; the entries, their locks and temporary
+siblings are laid out as :mod:`pytest_sal.store.cache_folder` says, and their bytes as
+:mod:`pytest_sal.store.entry_format` says.
 
 Every entry appears by one ``os.replace``/``rename`` of a finished temporary sibling, so readers
 see a whole entry or none. Reads set the entry's modification time, and :meth:`ContentCache.evict`
 removes the least recently used entries first.
 
-Entries check themselves. A result entry is ``{"sha256": ..., "data": {...}}``, the checksum
-being that of the canonical JSON of ``data`` (keys sorted, compact); a folder entry's manifest,
-written last, is such an entry too. Every read checks the checksum and the reader's own
+Entries check themselves (checksums, a folder's manifest). Every read checks the checksum and the reader's own
 ``check`` of the data's shape; every use of a folder entry compares the files' names and sizes
 with the manifest, and its first use by a :class:`ContentCache` object (once a session) also
 their SHA-256. An entry that is not UTF-8, not JSON, has no checksum, does not match it, fails
@@ -47,21 +41,18 @@ its entries are served, and what it lacks is computed and not stored, with one
 from __future__ import annotations
 
 import atexit
-import errno
-import hashlib
 import json
 import os
-import re
-import secrets
 import shutil
 import tempfile
-import time
 import warnings
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any
 
+from pytest_sal.store.cache_folder import CacheFolder, check_key
 from pytest_sal.store.cache_keys import CacheError
+from pytest_sal.store.entry_format import MANIFEST, file_listing, listing_mismatch, pack_entry, unpack_entry
 from sal_adapters.errors import CacheWarning
 from sal_adapters.file_lock import FileLock
 
@@ -73,32 +64,13 @@ __all__ = [
     "EntryCheck",
     "command_cache",
     "default_cache_dir",
-    "parse_size",
 ]
 
 #: The cache folder relative to the pytest rootdir (or the current folder for ``sal cache``).
 DEFAULT_CACHE_DIR = Path(".sal") / "cache"
 
-_KEY = re.compile(r"[0-9a-f]{16,128}")
-_TEMP = re.compile(r"\.tmp-(?P<key>[0-9a-f]{16,128})-")
-_SHARD = re.compile(r"[0-9a-f]{2}")
-_GITIGNORE = "# Created by pytest-sal: the trial cache; safe to delete (sal cache clear).\n*\n"
-_MANIFEST = "manifest.json"
-_FILES = "data"
-#: errno values of a write refused because the cache is read-only (mount or permissions).
-_READ_ONLY = frozenset({errno.EACCES, errno.EPERM, errno.EROFS})
-
 #: What is wrong with a stored dict, in words, or ``None`` (``ContentCache.compute``'s ``check``).
 EntryCheck = Callable[[dict[str, Any]], str | None]
-
-
-# --------------------------------------------------------------------------------------- keys
-
-
-def _check_key(key: str) -> str:
-    if not isinstance(key, str) or not _KEY.fullmatch(key):
-        raise CacheError(f"invalid cache key {key!r}: expected 16..128 lowercase hex digits (see pytest_sal.store.cache_keys.cache_key)")
-    return key
 
 
 # ---------------------------------------------------------------------------------- helpers
@@ -110,47 +82,9 @@ def default_cache_dir(rootdir: str | os.PathLike[str] | None = None) -> Path:
     return Path(rootdir if rootdir is not None else os.getcwd()).expanduser() / DEFAULT_CACHE_DIR
 
 
-_UNITS = {"": 1, "b": 1}
-for _power, _letter in enumerate("kmgt", start=1):
-    _UNITS[_letter] = _UNITS[_letter + "b"] = 1000**_power
-    _UNITS[_letter + "i"] = _UNITS[_letter + "ib"] = 1024**_power
-_SIZE = re.compile(r"\s*(\d+(?:\.\d*)?|\.\d+)\s*([a-z]*)\s*", re.IGNORECASE)
-
-
 def command_cache(cache_dir: str | os.PathLike[str] | None = None) -> ContentCache:
     """The cache a ``sal`` command uses: ``--cache-dir``, else ``./.sal/cache``."""
     return ContentCache(cache_dir if cache_dir is not None else default_cache_dir())
-
-
-def parse_size(text: str | int) -> int:
-    """Bytes of a size such as ``"500MB"``, ``"2G"``, ``"1.5GiB"``, ``"4096"`` or ``"2 gb"``.
-
-    ``K``/``M``/``G``/``T`` (with or without ``B``) are powers of 1000, ``Ki``/``Mi``/``Gi``/``Ti``
-    (with or without ``B``) powers of 1024; case does not matter; fractions are rounded to bytes.
-
-    Raises:
-        ValueError: for anything else, quoting the text.
-    """
-    if isinstance(text, int) and not isinstance(text, bool):
-        if text < 0:
-            raise ValueError(f"invalid size {text}: must be >= 0 bytes")
-        return text
-    match = _SIZE.fullmatch(str(text))
-    unit = match.group(2).lower() if match else None
-    if match is None or unit not in _UNITS:
-        raise ValueError(
-            f"invalid size {text!r}: expected bytes with an optional unit, e.g. 500MB, 2G, 1.5GiB, 4096 "
-            "(K, M, G, T = powers of 1000; Ki, Mi, Gi, Ti = powers of 1024)"
-        )
-    return round(float(match.group(1)) * _UNITS[unit])
-
-
-class _Entry(NamedTuple):
-    key: str
-    path: Path
-    is_dir: bool
-    size: int
-    used_ns: int
 
 
 # ------------------------------------------------------------------------------------ cache
@@ -176,7 +110,7 @@ class ContentCache:
         self.max_bytes = max_bytes
         self.read_only: str | None = None
         self._ready = False
-        self._last_ns = 0
+        self._folder = CacheFolder(self.root)
         self._hashed: set[str] = set()  # folder entries whose file hashes this object checked
 
     def __repr__(self) -> str:
@@ -187,9 +121,7 @@ class ContentCache:
     def path(self, key: str, folder: bool = False) -> Path:
         """Where the entry of ``key`` lives: a ``.json`` file, or when ``folder`` the folder of
         files that :meth:`compute_dir` returns (``data/`` in the entry, beside its manifest)."""
-        _check_key(key)
-        shard = self.root / key[:2]
-        return shard / key / _FILES if folder else shard / f"{key}.json"
+        return self._folder.entry_path(key, folder)
 
     # ---- result entries
 
@@ -213,7 +145,7 @@ class ContentCache:
         if not self._ensure_root():
             return
         with self.lock(key):
-            self._write(key, raw)
+            self._folder.write_entry(key, raw)
             self._evict_if_bounded()
 
     def compute(
@@ -245,7 +177,7 @@ class ContentCache:
             self._discard(key, self.path(key), problem)
             raw, data = self._encode(key, fn())
             if transient is None or transient(data) is None:
-                self._write(key, raw)
+                self._folder.write_entry(key, raw)
                 self._evict_if_bounded()
         return data, False
 
@@ -276,20 +208,8 @@ class ContentCache:
             if found:
                 return files, True
             self._discard(key, entry, problem)
-            self._remove_stale_temps(key[:2], only_key=key, holding=True)
-            staging = self._temp_path(key)
-            work = staging / "entry"
-            try:
-                (work / _FILES).mkdir(parents=True)
-                fn(work / _FILES)
-                if not (work / _FILES).is_dir():
-                    raise CacheError(f"compute_dir: the function removed its output folder {work / _FILES}", files)
-                (work / _MANIFEST).write_bytes(_pack({"files": _listing(work / _FILES, hashes=True)}))  # last
-                os.rename(work, entry)
-                self._hashed.add(key)
-                self._touch(entry)
-            finally:
-                shutil.rmtree(staging, ignore_errors=True)
+            self._folder.write_folder(key, fn)
+            self._hashed.add(key)
             self._evict_if_bounded()
         return files, False
 
@@ -301,9 +221,9 @@ class ContentCache:
         It is an ``flock(2)`` on ``root/locks/<key>.lock``, released when the holder exits or
         dies. Not re-entrant: :meth:`compute` and :meth:`put` take it themselves.
         """
-        _check_key(key)
+        check_key(key)
         self._ensure_root()
-        return FileLock(self.root / "locks" / f"{key}.lock")
+        return self._folder.lock(key)
 
     # ---- maintenance
 
@@ -319,17 +239,7 @@ class ContentCache:
         limit = self.max_bytes if max_bytes is None else max_bytes
         if limit is None or not self.root.is_dir():
             return 0
-        self._remove_stale_temps()
-        entries = sorted(self._entries(), key=lambda entry: (entry.used_ns, entry.key, entry.is_dir))
-        total = sum(entry.size for entry in entries)
-        removed = 0
-        for entry in entries:
-            if total <= limit:
-                break
-            if self._remove_entry(entry):
-                total -= entry.size
-                removed += 1
-        return removed
+        return self._folder.evict(limit)
 
     def clear(self) -> int:
         """Remove every entry (and leftover temporary files); returns how many entries went.
@@ -339,14 +249,13 @@ class ContentCache:
         """
         if not self.root.is_dir():
             return 0
-        self._remove_stale_temps()
-        return sum(self._remove_entry(entry) for entry in list(self._entries()))
+        return self._folder.clear()
 
     def stats(self) -> dict[str, Any]:
         """``{"root", "entries", "results", "folders", "bytes", "max_bytes"}`` of the cache."""
         if self.root.exists() and not self.root.is_dir():
             raise CacheError("not a folder; choose another cache folder", self.root)
-        entries = list(self._entries()) if self.root.is_dir() else []
+        entries = list(self._folder.entries()) if self.root.is_dir() else []
         folders = sum(entry.is_dir for entry in entries)
         return {
             "root": str(self.root),
@@ -364,32 +273,15 @@ class ContentCache:
         (warned once)."""
         if self._ready or self.read_only is not None:
             return self._ready
-        root = self.root
-        try:
-            fresh = not root.exists() or (root.is_dir() and not any(root.iterdir()))
-            root.mkdir(parents=True, exist_ok=True)
-            (root / "locks").mkdir(exist_ok=True)
-            probe = root / "locks" / f".probe-{os.getpid()}-{secrets.token_hex(4)}"
-            os.close(os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644))
-            os.unlink(probe)
-        except (FileExistsError, NotADirectoryError):
-            raise CacheError("not a folder; choose another cache folder", root) from None
-        except OSError as exc:
-            if exc.errno not in _READ_ONLY:
-                raise CacheError(f"cannot create the cache folder: {exc.strerror}", root) from None
-            self.read_only = exc.strerror or str(exc)
+        self.read_only = self._folder.create()
+        if self.read_only is not None:
             warnings.warn(
                 CacheWarning(
-                    f"the cache at {root} is read-only ({self.read_only}): the entries it holds are used, new results are computed and not stored"
+                    f"the cache at {self.root} is read-only ({self.read_only}): the entries it holds are used, new results are computed and not stored"
                 ),
                 stacklevel=3,
             )
             return False
-        gitignore = root / ".gitignore"
-        if fresh and not gitignore.exists():
-            temp = root / f".gitignore.{secrets.token_hex(4)}.tmp"
-            temp.write_text(_GITIGNORE, encoding="utf-8")
-            os.replace(temp, gitignore)
         self._ready = True
         return True
 
@@ -399,7 +291,7 @@ class ContentCache:
         if not isinstance(data, Mapping):
             raise CacheError(f"cache entry {key[:12]}...: expected a dict, got a {type(data).__name__}", path)
         try:
-            raw = _pack(data)
+            raw = pack_entry(data)
         except (TypeError, ValueError) as exc:
             raise CacheError(f"cache entry {key[:12]}... is not JSON-ready: {exc}", path) from None
         return raw, json.loads(raw)["data"]
@@ -416,12 +308,12 @@ class ContentCache:
             raise CacheError("not a folder; choose another cache folder", self.root) from None
         except OSError as exc:
             return None, f"cannot read it ({exc.strerror})"
-        data, problem = _unpack(raw)
+        data, problem = unpack_entry(raw)
         if data is not None and check is not None:
             problem = check(data)
         if problem is not None:
             return None, problem
-        self._touch(path)
+        self._folder.touch(path)
         return data, None
 
     def _discard(self, key: str, path: Path, problem: str | None) -> None:
@@ -433,7 +325,7 @@ class ContentCache:
         warnings.warn(CacheWarning(f"{path}: bad cache entry, {done} and computed again: {problem}"), stacklevel=3)
         self._hashed.discard(key)
         if self.read_only is None:
-            self._bury(key, path)
+            self._folder.bury(key, path)
 
     def _verify_dir(self, key: str) -> tuple[bool, str | None]:
         """``(True, None)`` when the folder entry of ``key`` matches its manifest (names and sizes,
@@ -444,198 +336,27 @@ class ContentCache:
         if not entry.is_dir():
             return False, None
         try:
-            raw = (entry / _MANIFEST).read_bytes()
+            raw = (entry / MANIFEST).read_bytes()
         except FileNotFoundError:
-            return False, f"no {_MANIFEST} (written before pytest-sal checked its entries, or a damaged entry)"
+            return False, f"no {MANIFEST} (written before pytest-sal checked its entries, or a damaged entry)"
         except OSError as exc:
-            return False, f"cannot read {_MANIFEST} ({exc.strerror})"
-        manifest, problem = _unpack(raw)
+            return False, f"cannot read {MANIFEST} ({exc.strerror})"
+        manifest, problem = unpack_entry(raw)
         if manifest is None:
-            return False, f"{_MANIFEST}: {problem}"
+            return False, f"{MANIFEST}: {problem}"
         try:
-            problem = _mismatch(manifest.get("files"), _listing(files, hashes=key not in self._hashed))
+            problem = listing_mismatch(manifest.get("files"), file_listing(files, hashes=key not in self._hashed))
         except OSError as exc:
             problem = f"cannot read {exc.filename} ({exc.strerror})"
         if problem is not None:
             return False, problem
         self._hashed.add(key)
-        self._touch(entry)
+        self._folder.touch(entry)
         return True, None
-
-    def _write(self, key: str, raw: bytes) -> None:
-        """Write the entry through a temporary sibling and ``os.replace`` (caller holds the lock)."""
-        path = self.path(key)
-        temp = self._temp_path(key, ".json")
-        try:
-            path.parent.mkdir(exist_ok=True)
-            self._remove_stale_temps(key[:2], only_key=key, holding=True)  # a killed writer's
-            with open(temp, "xb") as handle:
-                handle.write(raw)
-                handle.flush()
-                os.fsync(handle.fileno())
-            self._stamp(temp)
-            os.replace(temp, path)
-        except OSError as exc:
-            raise CacheError(f"cannot write cache entry: {exc.strerror or exc}", path) from None
-        finally:
-            if temp.exists():
-                temp.unlink()
-
-    def _temp_path(self, key: str, suffix: str = "") -> Path:
-        return self.root / key[:2] / f".tmp-{key}-{os.getpid()}-{secrets.token_hex(4)}{suffix}"
 
     def _evict_if_bounded(self) -> None:
         if self.max_bytes is not None:
             self.evict()
-
-    def _now_ns(self) -> int:
-        """Wall-clock ns, strictly increasing within this process (file times are LRU order)."""
-        self._last_ns = max(time.time_ns(), self._last_ns + 1)
-        return self._last_ns
-
-    def _stamp(self, path: Path) -> None:
-        now = self._now_ns()
-        os.utime(path, ns=(now, now))
-
-    def _touch(self, path: Path) -> None:
-        try:
-            self._stamp(path)
-        except OSError:  # evicted meanwhile, or a read-only cache: the data is still good
-            pass
-
-    def _shards(self) -> Iterator[Path]:
-        try:
-            children = list(os.scandir(self.root))
-        except FileNotFoundError:
-            return
-        except OSError as exc:
-            raise CacheError(f"cannot list the cache folder: {exc.strerror}", self.root) from None
-        for child in children:
-            if _SHARD.fullmatch(child.name) and child.is_dir(follow_symlinks=False):
-                yield Path(child.path)
-
-    def _entries(self) -> Iterator[_Entry]:
-        for shard in self._shards():
-            for child in _scandir(shard):
-                name = child.name
-                is_dir = child.is_dir(follow_symlinks=False)
-                key = name if is_dir else name.removesuffix(".json")
-                if not _KEY.fullmatch(key) or key[:2] != shard.name or (not is_dir and not name.endswith(".json")):
-                    continue
-                try:
-                    info = child.stat(follow_symlinks=False)
-                    size = _tree_size(Path(child.path)) if is_dir else info.st_size
-                except FileNotFoundError:  # removed meanwhile
-                    continue
-                yield _Entry(key, Path(child.path), is_dir, size, info.st_mtime_ns)
-
-    def _remove_entry(self, entry: _Entry) -> bool:
-        lock = FileLock(self.root / "locks" / f"{entry.key}.lock")
-        if not lock.acquire(blocking=False):
-            return False
-        try:
-            return self._bury(entry.key, entry.path)
-        finally:
-            lock.release()
-
-    def _bury(self, key: str, path: Path) -> bool:
-        """Remove the entry of ``key`` at ``path`` (the caller holds the key's lock); a folder is
-        renamed away first, so no reader sees half of one. False when it was gone already."""
-        try:
-            if path.is_dir() and not path.is_symlink():
-                grave = self._temp_path(key)
-                os.rename(path, grave)
-                shutil.rmtree(grave, ignore_errors=True)
-            else:
-                path.unlink()
-        except FileNotFoundError:
-            return False
-        except OSError as exc:
-            raise CacheError(f"cannot remove cache entry: {exc.strerror}", path) from None
-        return True
-
-    def _remove_stale_temps(self, shard_name: str | None = None, only_key: str | None = None, holding: bool = False) -> None:
-        """Remove temporary files and folders whose key nobody holds locked (killed writers)."""
-        shards = [self.root / shard_name] if shard_name else list(self._shards())
-        for shard in shards:
-            for child in _scandir(shard):
-                match = _TEMP.match(child.name)
-                if match is None or (only_key is not None and match["key"] != only_key):
-                    continue
-                if holding:
-                    _remove_path(Path(child.path))
-                    continue
-                lock = FileLock(self.root / "locks" / f"{match['key']}.lock")
-                if lock.acquire(blocking=False):
-                    try:
-                        _remove_path(Path(child.path))
-                    finally:
-                        lock.release()
-
-
-def _canonical(data: Mapping[str, Any]) -> str:
-    """The JSON text an entry's checksum covers: keys sorted, compact, UTF-8 kept."""
-    return json.dumps(dict(data), sort_keys=True, separators=(",", ":"), ensure_ascii=False)
-
-
-def _sha256(text: str) -> str:
-    return hashlib.sha256(text.encode("utf-8")).hexdigest()
-
-
-def _pack(data: Mapping[str, Any]) -> bytes:
-    """The bytes of an entry holding ``data``: ``{"sha256": <of the canonical JSON>, "data": ...}``."""
-    payload = _canonical(data)
-    return f'{{"sha256":"{_sha256(payload)}","data":{payload}}}\n'.encode()
-
-
-def _unpack(raw: bytes) -> tuple[dict[str, Any] | None, str | None]:
-    """``(data, None)`` of an entry's bytes, or ``(None, what is wrong)`` in a few words."""
-    try:
-        entry = json.loads(raw.decode("utf-8"))
-    except UnicodeDecodeError as exc:
-        return None, f"not UTF-8 (byte 0x{raw[exc.start]:02x} at offset {exc.start})"
-    except ValueError as exc:
-        return None, f"not JSON ({exc})" if raw.strip() else "empty"
-    if not isinstance(entry, dict) or set(entry) != {"sha256", "data"}:
-        shape = f"keys {', '.join(sorted(entry)[:5]) or '(none)'}" if isinstance(entry, dict) else f"a JSON {type(entry).__name__}"
-        return None, f"no checksum: {shape}, not sha256 and data (written by hand, or before pytest-sal checked its entries)"
-    if not isinstance(entry["data"], dict):
-        return None, f"its data is a JSON {type(entry['data']).__name__}, not an object"
-    if _sha256(_canonical(entry["data"])) != entry["sha256"]:
-        return None, "checksum mismatch: changed after it was written"
-    return entry["data"], None
-
-
-def _listing(folder: Path, hashes: bool) -> dict[str, list[Any]]:
-    """``{relative path: [size, SHA-256 or None]}`` of every file under ``folder``."""
-    out: dict[str, list[Any]] = {}
-    for base, _dirs, names in os.walk(folder):
-        for name in names:
-            path = os.path.join(base, name)
-            out[os.path.relpath(path, folder)] = [os.stat(path).st_size, _file_sha256(path) if hashes else None]
-    return out
-
-
-def _file_sha256(path: str) -> str:
-    with open(path, "rb") as handle:
-        return hashlib.file_digest(handle, "sha256").hexdigest()
-
-
-def _mismatch(listed: Any, found: dict[str, list[Any]]) -> str | None:
-    """How the files ``found`` (``_listing``) differ from a manifest's ``listed`` files."""
-    if not isinstance(listed, dict) or not all(isinstance(v, list) and len(v) == 2 for v in listed.values()):
-        return f"{_MANIFEST} lists no files"
-    for name in sorted(set(listed) | set(found)):
-        if name not in found:
-            return f"{_FILES}/{name} is missing"
-        if name not in listed:
-            return f"{_FILES}/{name} is not in {_MANIFEST}"
-        (size, digest), (real_size, real_digest) = listed[name], found[name]
-        if real_size != size:
-            return f"{_FILES}/{name} has {real_size} bytes, {_MANIFEST} says {size}"
-        if real_digest is not None and real_digest != digest:
-            return f"{_FILES}/{name}: content differs from its SHA-256 in {_MANIFEST}"
-    return None
 
 
 def _fill_outside(fn: Callable[[Path], None]) -> Path:
@@ -645,31 +366,3 @@ def _fill_outside(fn: Callable[[Path], None]) -> Path:
     atexit.register(shutil.rmtree, folder, ignore_errors=True)
     fn(folder)
     return folder
-
-
-def _scandir(folder: Path) -> list[os.DirEntry[str]]:
-    try:
-        return list(os.scandir(folder))
-    except (FileNotFoundError, NotADirectoryError):
-        return []
-
-
-def _tree_size(folder: Path) -> int:
-    total = 0
-    for base, _dirs, files in os.walk(folder):
-        for name in files:
-            try:
-                total += os.lstat(os.path.join(base, name)).st_size
-            except FileNotFoundError:
-                pass
-    return total
-
-
-def _remove_path(path: Path) -> None:
-    if path.is_dir() and not path.is_symlink():
-        shutil.rmtree(path, ignore_errors=True)
-    else:
-        try:
-            path.unlink()
-        except FileNotFoundError:
-            pass

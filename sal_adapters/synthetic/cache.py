@@ -22,7 +22,7 @@ import numpy as np
 from sal_adapters.cache_dir import cache_writes_allowed, user_cache_dir
 from sal_adapters.errors import CacheWarning, DatasetError
 from sal_adapters.images import read_depth, read_image, read_stored, write_depth, write_image
-from sal_adapters.sequence import FrameRecord, Sequence
+from sal_adapters.sequence import FrameRecord, Sequence, as_sensor
 from sal_adapters.synthetic.layout import (
     DEPTH,
     LEFT,
@@ -93,7 +93,8 @@ class FrameStore:
         expected = (height, width) if stream == DEPTH else (height, width, 3)
         data, problem = read_stored(path, partial(read_depth, depth_scale=None) if stream == DEPTH else read_image)
         if data is not None and data.shape != expected:
-            data, problem = None, f"holds an array of shape {data.shape}, a render gives {expected}"
+            problem = f"holds an array of shape {data.shape}, a render gives {expected}"
+            data = None
         if problem is not None:
             self._discard(path, problem)
         return data
@@ -160,7 +161,7 @@ def rendered_sequence(world: World, folder: Path, frames: int, sensor: str) -> S
         kind="synthetic",
         name=_name(world),
         camera=world.camera(sensor),
-        sensor=sensor,  # type: ignore[arg-type]
+        sensor=as_sensor(sensor),
         fps=world.fps,
         records=records,
         groundtruth=groundtruth,

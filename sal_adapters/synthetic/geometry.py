@@ -15,10 +15,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["FACE_NAMES", "BoxBuilder", "Boxes", "Faces", "clip_polygon", "paint_order", "visible_faces"]
+__all__ = ["FACE_NAMES", "BoxBuilder", "Boxes", "Face", "Faces", "clip_polygon", "paint_order", "visible_faces"]
 
 #: Face names by number: ``-x`` is the face at ``lo[0]`` whose outward normal is -x, etc.
 FACE_NAMES = ("-x", "+x", "-y", "+y", "-z", "+z")
+
+#: How one face is drawn: ``(atlas tile, ds, dt)``, the densities in texels per metre.
+Face = tuple[int, float, float]
 
 #: Faces whose camera is closer than this to their plane are seen edge-on and skipped (m).
 EDGE_ON = 1e-3
@@ -60,10 +63,11 @@ class BoxBuilder:
         self._tiles: list[list[int]] = []
         self._density: list[list[tuple[float, float]]] = []
 
-    def add(self, lo: Iterable[float], hi: Iterable[float], faces: Mapping[str, tuple[int, float, float]]) -> None:
-        """Add the box ``lo..hi`` (m); ``faces`` maps face names (``FACE_NAMES``) to
-        ``(tile, ds, dt)`` with densities in texels per metre; other faces are not drawn."""
-        lo, hi = tuple(float(v) for v in lo), tuple(float(v) for v in hi)
+    def add(self, lo: Iterable[float], hi: Iterable[float], faces: Mapping[str, Face]) -> None:
+        """Add the box ``lo..hi`` (m, three coordinates each); ``faces`` maps face names
+        (``FACE_NAMES``) to ``(tile, ds, dt)`` with densities in texels per metre; other faces
+        are not drawn."""
+        lo, hi = _corner(lo), _corner(hi)
         if any(a > b for a, b in zip(lo, hi)):
             raise ValueError(f"box lo {lo} exceeds hi {hi}")
         unknown = set(faces) - set(FACE_NAMES)
@@ -121,6 +125,12 @@ class Faces:
         return cls(**{name: np.concatenate([vars(p)[name] for p in parts]) for name in vars(parts[0])})
 
 
+def _corner(values: Iterable[float]) -> tuple[float, float, float]:
+    """A box corner as three floats (m)."""
+    x, y, z = (float(v) for v in values)
+    return x, y, z
+
+
 def visible_faces(boxes: Boxes, eye: np.ndarray, inside: bool = False) -> Faces:
     """Drawn faces of ``boxes`` that face the point ``eye`` (m), grouped by box.
 
@@ -138,7 +148,8 @@ def visible_faces(boxes: Boxes, eye: np.ndarray, inside: bool = False) -> Faces:
     keep = (boxes.tiles.reshape(-1) >= 0) & (offset > EDGE_ON)
     if inside:
         keep &= np.all((eye > boxes.lo) & (eye < boxes.hi), axis=1)[box]
-    axis, side, box, lo, hi, coord, normal = (a[keep] for a in (axis, side, box, lo, hi, coord, normal))
+    axis, side, box = axis[keep], side[keep], box[keep]
+    lo, hi, coord, normal = lo[keep], hi[keep], coord[keep], normal[keep]
     # Texture frame: vertical faces have s = n_out x down, t = down; horizontal ones s = +x, t = n_out_y * z.
     vertical = axis != 1
     axis_s = np.where(vertical, 2 - axis, 0)

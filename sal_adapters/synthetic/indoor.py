@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from sal_adapters.synthetic.atlas import TILE
-from sal_adapters.synthetic.geometry import BoxBuilder
+from sal_adapters.synthetic.geometry import BoxBuilder, Face
 from sal_adapters.synthetic.indoor_tiles import (
     CRATES,
     INDOOR_TILES,
@@ -77,7 +77,7 @@ class IndoorWorld(World):
         walls = [t[f"wall{k}"] for k in rng.permutation(WALLS)]
         room = BoxBuilder()
         height = ROOM_HI[1] - ROOM_LO[1]
-        faces = {name: (wall, 128, TILE / height) for name, wall in zip(("-x", "+x", "-z", "+z"), walls)}
+        faces: dict[str, Face] = {name: (wall, 128, TILE / height) for name, wall in zip(("-x", "+x", "-z", "+z"), walls)}
         faces["+y"] = (t["floor"], 128, 128)
         faces["-y"] = (t["ceiling"], TILE / 2.4, TILE / 2.4)
         room.add(ROOM_LO, ROOM_HI, faces)
@@ -131,7 +131,7 @@ class IndoorWorld(World):
         x1, z1 = x0 + width, z0 + depth
         wood = (t["wood"], 128, 128)
         b.add((x0, -height, z0), (x1, -height + 0.04, z1), {n: wood for n in ("-x", "+x", "-y", "-z", "+z")})
-        metal = (t["metal"], 128, 128)
+        metal: Face = (t["metal"], 128, 128)
         for x in (x0 + 0.05, x1 - 0.1):
             for z in (z0 + 0.05, z1 - 0.1):
                 b.add((x, -height + 0.04, z), (x + 0.05, 0.0, z + 0.05), {n: metal for n in ("-x", "+x", "-z", "+z")})
@@ -182,7 +182,7 @@ class IndoorWorld(World):
         z = rng.uniform(-0.5, 2.8 - length)
         lo, hi = sorted((wall_x + sofa_side * 0.02, wall_x + sofa_side * (0.02 + depth)))
         front = "+x" if sofa_side > 0 else "-x"
-        side = (t["metal"], 128, 128)
+        side: Face = (t["metal"], 128, 128)
         faces = {n: side for n in ("-x", "+x", "-y", "-z", "+z")}
         faces[front] = (t["drawers"], TILE / length, TILE / height)
         b.add((lo, -height, z), (hi, 0.0, z + length), faces)

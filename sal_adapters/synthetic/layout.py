@@ -23,7 +23,7 @@ from typing import Any
 from sal_adapters.camera import Camera
 from sal_adapters.errors import DatasetError
 from sal_adapters.images import write_depth, write_image
-from sal_adapters.sequence import SENSORS, Frame, FrameRecord, Sequence
+from sal_adapters.sequence import SENSORS, Frame, FrameRecord, Sequence, as_sensor
 from sal_adapters.textfiles import atomic_write_text, check_times, format_float, read_rows
 from sal_adapters.trajectory import Trajectory
 
@@ -168,8 +168,8 @@ def read_layout(folder: Path, info: dict[str, Any], sensor: str | None) -> Seque
     times = folder / TIMES
     listing = {name: set(os.listdir(folder / name)) if (folder / name).is_dir() else set() for name in (LEFT, RIGHT, DEPTH)}
     explicit = sensor is not None
-    sensor = sensor or info["sensor"]
-    needed = [LEFT] + ([RIGHT] if sensor == "stereo" else []) + ([DEPTH] if sensor == "rgbd" else [])
+    chosen = as_sensor(sensor or info["sensor"])
+    needed = [LEFT] + ([RIGHT] if chosen == "stereo" else []) + ([DEPTH] if chosen == "rgbd" else [])
     records = []
     for number, row in read_times(times):
         files = {name: folder / name / f"{row.stem}{'.npy' if name == DEPTH else '.png'}" for name in listing}
@@ -177,8 +177,8 @@ def read_layout(folder: Path, info: dict[str, Any], sensor: str | None) -> Seque
         for name in needed:
             if not present[name]:
                 raise DatasetError(f"frame {row.stem!r} (listed in {times}:{number}) has no file", files[name])
-        right = files[RIGHT] if present[RIGHT] and (not explicit or sensor == "stereo") else None
-        depth = files[DEPTH] if present[DEPTH] and (not explicit or sensor == "rgbd") else None
+        right = files[RIGHT] if present[RIGHT] and (not explicit or chosen == "stereo") else None
+        depth = files[DEPTH] if present[DEPTH] and (not explicit or chosen == "rgbd") else None
         records.append(FrameRecord(row.index, row.timestamp, row.stem, files[LEFT], right, depth, row.timestamp_ns))
     groundtruth = Trajectory.read_tum(folder / GROUNDTRUTH) if (folder / GROUNDTRUTH).is_file() else None
     camera: Camera = info["camera"]
@@ -187,7 +187,7 @@ def read_layout(folder: Path, info: dict[str, Any], sensor: str | None) -> Seque
         kind="synthetic",
         name=str(info["name"]),
         camera=camera,
-        sensor=sensor,
+        sensor=chosen,
         fps=float(info["fps"]),
         records=records,
         groundtruth=groundtruth,

@@ -191,7 +191,7 @@ class Renderer:
             rows = slice(r0, min(r0 + strip, self.height))
             rgb[rows], depth[rows] = self._shade_rows(ids[rows], table, self.v[rows])
         if stage.fog is not None and stage.sky_tile is not None:
-            self._fog(rgb, depth, stage)
+            self._fog(rgb, depth, stage.fog, stage.sky_tile)
         return rgb, depth
 
     def _shade_rows(self, ids: np.ndarray, table: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -221,16 +221,16 @@ class Renderer:
         z[ids == 0] = 0.0
         return rgb, z
 
-    def _fog(self, rgb: np.ndarray, depth: np.ndarray, stage: Stage) -> None:
-        """Blend pixels beyond the fog start into the sky's horizon colour, in place (within
-        the bounding box of those pixels only)."""
-        start, end = stage.fog
+    def _fog(self, rgb: np.ndarray, depth: np.ndarray, fog: tuple[float, float], sky_tile: int) -> None:
+        """Blend pixels beyond the fog start (``fog``: start and end, m) into the horizon
+        colour of the sky tile, in place (within the bounding box of those pixels only)."""
+        start, end = fog
         far = depth > start
         rows, cols = np.flatnonzero(far.any(axis=1)), np.flatnonzero(far.any(axis=0))
         if len(rows) == 0:
             return
         box = np.s_[rows[0] : rows[-1] + 1, cols[0] : cols[-1] + 1]
-        x0, y0 = self.atlas.origin[stage.sky_tile]
+        x0, y0 = self.atlas.origin[sky_tile]
         horizon = self.atlas.image[int(y0 + SKY_HORIZON), int(x0 + TILE // 2)]
         weight = np.clip((depth[box] - start) * np.float32(1.0 / (end - start)), 0.0, 1.0)
         haze = np.empty_like(rgb[box])

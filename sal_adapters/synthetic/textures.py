@@ -188,7 +188,7 @@ def write(tile: np.ndarray, text: str, origin: tuple[int, int], scale: float, co
     tile += alpha * (np.asarray(colour, np.float32) - tile)
 
 
-def _floats(colour: Colour) -> tuple[float, ...]:
+def _floats(colour: Colour | np.ndarray) -> tuple[float, ...]:
     """A colour as plain floats (OpenCV drawing rejects numpy float32 scalars)."""
     return tuple(float(c) for c in colour)
 

@@ -14,7 +14,7 @@ from functools import lru_cache
 import numpy as np
 
 from sal_adapters.synthetic.atlas import TILE
-from sal_adapters.synthetic.geometry import BoxBuilder, Boxes
+from sal_adapters.synthetic.geometry import BoxBuilder, Boxes, Face
 from sal_adapters.synthetic.render import Stage
 from sal_adapters.synthetic.urban_tiles import (
     CAR_COLOURS,
@@ -168,7 +168,8 @@ class UrbanWorld(World):
                 body, top = self.tiles[f"car_side{colour}"], self.tiles[f"car_top{colour}"]
                 end, glass, screen = self.tiles["car_end"], self.tiles["cabin_side"], self.tiles["cabin_end"]
                 near, far = ROAD - 1.85, ROAD - 0.05
-                sides, ends = (body, TILE / length, TILE), (end, TILE / 1.8, TILE)
+                sides: Face = (body, TILE / length, TILE)
+                ends: Face = (end, TILE / 1.8, TILE)
                 _side_box(
                     b,
                     side,
@@ -228,7 +229,7 @@ def _side_box(
     y1: float,
     z0: float,
     z1: float,
-    faces: dict[str, tuple[int, float, float]],
+    faces: dict[str, Face],
 ) -> None:
     """Add a box between ``near`` and ``far`` metres from the centre line on ``side`` (-1 left,
     +1 right); face names ``street`` (towards the road) and ``back`` are mapped to x faces."""

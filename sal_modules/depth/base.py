@@ -23,7 +23,7 @@ from sal_adapters.cache_dir import cache_writes_allowed, user_cache_dir
 from sal_adapters.errors import CacheWarning
 from sal_adapters.images import read_depth, read_stored, write_depth
 from sal_adapters.sequence import Sequence
-from sal_modules.base import DepthLookup
+from sal_modules.context import DepthLookup
 
 __all__ = ["CachedDepth", "DepthProvider", "fill_unknown"]
 
@@ -122,7 +122,8 @@ class CachedDepth:
         camera = self.sequence.camera
         depth, problem = read_stored(path, partial(read_depth, depth_scale=None))
         if depth is not None and depth.shape != (camera.height, camera.width):
-            depth, problem = None, f"depth array of shape {depth.shape}, the frames are {camera.height}x{camera.width} px"
+            problem = f"depth array of shape {depth.shape}, the frames are {camera.height}x{camera.width} px"
+            depth = None
         if problem is not None:
             done = "computed again and replaced" if self._store else "computed again (nothing is stored)"
             warnings.warn(CacheWarning(f"{path}: bad cached depth, {done}: {problem}"), stacklevel=4)

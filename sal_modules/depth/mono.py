@@ -79,7 +79,7 @@ class MonoDepth(DepthProvider):
         self.scale = float(scale)
         self.mean = tuple(float(v) for v in mean)
         self.std = tuple(float(v) for v in std)
-        self._session: tuple[tuple[int, int], Any] | None = None
+        self._session: tuple[tuple[int, int] | None, Any] | None = None
         self._digest: tuple[tuple[int, int], str] | None = None
         self._lock = Lock()
 
@@ -170,14 +170,15 @@ class MonoDepth(DepthProvider):
         size = [d if isinstance(d, int) and d > 0 else None for d in dims]
         fallback = self.input_size or DEFAULT_INPUT_SIZE
         height, width = (size[0] or fallback[0], size[1] or fallback[1])
-        x = cv2.resize(image, (width, height), interpolation=cv2.INTER_CUBIC).astype(np.float32) / 255.0
-        x = (x - np.float32(self.mean)) / np.float32(self.std)
-        x = x[None] if channels_last else x.transpose(2, 0, 1)[None]
-        y = np.asarray(session.run(None, {model_input.name: np.ascontiguousarray(x, dtype=np.float32)})[0], dtype=np.float32)
-        y = np.squeeze(y)
-        if y.ndim != 2:
-            raise ModuleError(f"monocular depth model {self.model} must output one value per pixel, its output has shape {y.shape}")
-        y = cv2.resize(y, (image.shape[1], image.shape[0]), interpolation=cv2.INTER_LINEAR)
+        pixels = cv2.resize(image, (width, height), interpolation=cv2.INTER_CUBIC).astype(np.float32) / 255.0
+        normalised = (pixels - np.asarray(self.mean, np.float32)) / np.asarray(self.std, np.float32)
+        batch = normalised[None] if channels_last else normalised.transpose(2, 0, 1)[None]
+        output = np.asarray(session.run(None, {model_input.name: np.ascontiguousarray(batch, dtype=np.float32)})[0], dtype=np.float32)
+        output = np.squeeze(output)
+        if output.ndim != 2:
+            raise ModuleError(f"monocular depth model {self.model} must output one value per pixel, its output has shape {output.shape}")
+        y = cv2.resize(output, (image.shape[1], image.shape[0]), interpolation=cv2.INTER_LINEAR)
+        depth: np.ndarray
         if self.output == "metric":
             depth = self.scale * y
         else:

@@ -47,8 +47,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-from sal_modules.base import ModuleContext
 from sal_modules.colour import srgb_to_linear
+from sal_modules.context import ModuleContext
 from sal_modules.errors import ModuleError
 from sal_modules.light.sensor import (
     LUMA,

@@ -73,8 +73,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from sal_modules.base import ModuleContext, Perturbation
+from sal_modules.base import Perturbation
 from sal_modules.colour import srgb_to_linear
+from sal_modules.context import ModuleContext
 from sal_modules.errors import ModuleError
 from sal_modules.light.sensor import LUMA, linear_to_srgb, white_balance
 from sal_modules.params import Param

@@ -77,14 +77,15 @@ def remap(image: np.ndarray, coordinates: np.ndarray) -> np.ndarray:
     if image.ndim == 3 and image.shape[2] == 3:
         padded = cv2.cvtColor(image, cv2.COLOR_RGB2RGBA)
         return cv2.cvtColor(remap(padded, coordinates), cv2.COLOR_RGBA2RGB)
-    return cv2.remap(image, coordinates, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    # one (x, y) map and no second one: OpenCV takes it, its stubs want two maps
+    return cv2.remap(image, coordinates, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)  # type: ignore[call-overload]
 
 
 def dense_flow(source: np.ndarray, target: np.ndarray) -> np.ndarray:
     """DIS optical flow ``F`` (HxWx2 float32 px) with ``source(x) ~ target(x + F(x))``;
     both are HxW uint8 grey images."""
-    dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST)
-    return dis.calc(source, target, None)
+    dis = cv2.DISOpticalFlow.create(cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST)
+    return dis.calc(source, target, None)  # type: ignore[call-overload]  # no initial flow: OpenCV takes None, its stubs do not
 
 
 def reprojection_flow(depth: np.ndarray, camera: Camera, motion: np.ndarray) -> np.ndarray:

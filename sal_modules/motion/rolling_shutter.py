@@ -26,7 +26,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from sal_modules.base import DepthLookup, ModuleContext, Perturbation
+from sal_modules.base import Perturbation
+from sal_modules.context import DepthLookup, ModuleContext
 from sal_modules.depth import NativeDepth
 from sal_modules.errors import ModuleError
 from sal_modules.motion.flow import CleanFrames, reprojection_flow, warp
@@ -73,7 +74,7 @@ class RollingShutter(Perturbation):
                 )
             if missing:
                 self._depth = None
-            else:  # per-frame ground truth: pose p belongs to the frame at position p
+            elif sequence.groundtruth is not None:  # per-frame ground truth: pose p belongs to the frame at position p
                 self._poses = sequence.groundtruth.matrices
 
     @property
@@ -95,7 +96,9 @@ class RollingShutter(Perturbation):
         """Image velocity (HxWx2 float32, px/s) of the clean frame at ``position``."""
         times = self._frames.times
         neighbours = [j for j in (position - 1, position + 1) if 0 <= j < len(self._frames)]
-        total = sum(self._motion(position, j, stream) / np.float32(times[j] - times[position]) for j in neighbours)
+        total = sum(
+            (self._motion(position, j, stream) / np.float32(times[j] - times[position]) for j in neighbours), np.zeros((), np.float32)
+        )
         return total / np.float32(len(neighbours))
 
     def _motion(self, source: int, target: int, stream: str) -> np.ndarray:

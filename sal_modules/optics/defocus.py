@@ -34,7 +34,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-from sal_modules.base import ModuleContext, Perturbation
+from sal_modules.base import Perturbation
+from sal_modules.context import ModuleContext
 from sal_modules.errors import ModuleError
 from sal_modules.params import Param
 from sal_modules.work_buffers import scratch

@@ -14,7 +14,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-from sal_modules.base import ModuleContext, Perturbation
+from sal_modules.base import Perturbation
+from sal_modules.context import ModuleContext
 
 __all__ = ["LensEffect", "Overlay"]
 

@@ -43,7 +43,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-from sal_modules.base import ModuleContext, SequencePerturbation
+from sal_modules.base import SequencePerturbation
+from sal_modules.context import ModuleContext
 from sal_modules.errors import ModuleError
 from sal_modules.params import Param
 

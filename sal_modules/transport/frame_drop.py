@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from sal_modules.base import ModuleContext, Perturbation
+from sal_modules.base import Perturbation
+from sal_modules.context import ModuleContext
 from sal_modules.params import Param
 
 __all__ = ["FrameDrop"]

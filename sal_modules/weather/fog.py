@@ -45,8 +45,9 @@ import cv2
 import numpy as np
 
 from sal_adapters.camera import Camera
-from sal_modules.base import ModuleContext, Perturbation
+from sal_modules.base import Perturbation
 from sal_modules.colour import DECODE_TABLE, encode_table, srgb_decode, srgb_to_linear
+from sal_modules.context import ModuleContext
 from sal_modules.params import Param
 from sal_modules.weather.noise import GradientNoise
 from sal_modules.work_buffers import scratch
@@ -194,14 +195,14 @@ class Fog(Perturbation):
     def apply(self, image: np.ndarray, depth: np.ndarray | None, index: int, stream: str) -> np.ndarray:
         assert depth is not None
         t = self.transmission(depth, index, stream, out=scratch("fog.t", depth.shape))
-        return blend_srgb(image, t, [(cv2.subtract(1.0, t, dst=scratch("fog.airlight", t.shape)), self.airlight)])
+        return blend_srgb(image, t, [(cv2.subtract(1.0, t, dst=scratch("fog.airlight", t.shape)), self.airlight)])  # type: ignore[call-overload]  # cv2 takes a number operand; its stubs want an array
 
     def transmission(self, depth: np.ndarray, index: int, stream: str, out: np.ndarray | None = None) -> np.ndarray:
         """t = exp(-tau) per pixel (float32 HxW) for the depth map of frame ``index``, written
         into ``out`` when given."""
         tau = self.optical_depth(depth, index, stream, out)
         np.minimum(tau, np.float32(80.0), out=tau)
-        return cv2.exp(cv2.multiply(tau, -1.0, dst=tau), dst=tau)
+        return cv2.exp(cv2.multiply(tau, -1.0, dst=tau), dst=tau)  # type: ignore[call-overload]  # cv2 takes a number operand; its stubs want an array
 
     def optical_depth(self, depth: np.ndarray, index: int, stream: str, out: np.ndarray | None = None) -> np.ndarray:
         """tau (float32 HxW) along each pixel's line of sight, written into ``out`` when given;
@@ -230,7 +231,7 @@ class Fog(Perturbation):
         return np.maximum(0.0, 1.0 + self.heterogeneity * self._noise(np.asarray(points) / self.noise_scale_m))
 
     def _grid(self, stream: str, shape: tuple[int, int]) -> _RayGrid:
-        key = (stream, tuple(shape))
+        key = (stream, (shape[0], shape[1]))
         if key not in self._grids:
             self._grids[key] = _RayGrid(self.ready_context().camera_for(stream), key[1])
         return self._grids[key]

@@ -59,7 +59,8 @@ from typing import ClassVar
 import cv2
 import numpy as np
 
-from sal_modules.base import ModuleContext, Perturbation
+from sal_modules.base import Perturbation
+from sal_modules.context import ModuleContext
 from sal_modules.params import Param
 from sal_modules.weather.fog import (
     blend_srgb,
@@ -259,8 +260,8 @@ class Precipitation(Perturbation):
             self._lengths[key] = ray_lengths(self.ready_context().camera_for(stream), depth.shape)
         distance = cv2.multiply(depth.astype(np.float32, copy=False), self._lengths[key], dst=scratch("precipitation.t", depth.shape))
         distance[depth <= 0] = self.sky_distance_m
-        t = cv2.exp(cv2.multiply(distance, -self.extinction(self.rate), dst=distance), dst=distance)
-        clear = cv2.subtract(1.0, alpha, dst=scratch("precipitation.clear", depth.shape))
+        t = cv2.exp(cv2.multiply(distance, -self.extinction(self.rate), dst=distance), dst=distance)  # type: ignore[call-overload]  # cv2 takes a number operand; its stubs want an array
+        clear = cv2.subtract(1.0, alpha, dst=scratch("precipitation.clear", depth.shape))  # type: ignore[call-overload]  # cv2 takes a number operand; its stubs want an array
         gain = cv2.multiply(t, clear, dst=t)
         haze = cv2.subtract(clear, gain, dst=clear)  # (1 - t)(1 - alpha)
         return blend_srgb(image, gain, [(haze, self.airlight), (alpha, self.particle_radiance(image, self.airlight))])
@@ -310,7 +311,7 @@ class Precipitation(Perturbation):
         owner, su, sv = owner[seen], su[seen], sv[seen]
         weight = (ink * scale * scale / count)[owner]
         density = self._splat(su, sv, weight, level[owner], (h, w))
-        return cv2.subtract(1.0, cv2.exp(cv2.multiply(density, -1.0, dst=density), dst=density), dst=density)
+        return cv2.subtract(1.0, cv2.exp(cv2.multiply(density, -1.0, dst=density), dst=density), dst=density)  # type: ignore[call-overload]  # cv2 takes a number operand; its stubs want an array
 
     @staticmethod
     def _splat(u: np.ndarray, v: np.ndarray, weight: np.ndarray, level: np.ndarray, shape: tuple[int, int]) -> np.ndarray:

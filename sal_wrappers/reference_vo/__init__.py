@@ -1,8 +1,8 @@
 """``reference_vo``: the built-in, deterministic visual odometry (OpenCV only, in process).
 
 ``system`` is the :class:`~sal_wrappers.base.SlamSystem`; ``odometry`` its per-frame state
-machine; ``geometry`` the lens model, features, matching and poses; ``bundle`` the local
-bundle adjustment of the monocular mode.
+machine; ``lens`` the working camera; ``features`` ORB features and matching; ``geometry``
+depth, poses and triangulation; ``bundle`` the local bundle adjustment of the monocular mode.
 """
 
 from __future__ import annotations

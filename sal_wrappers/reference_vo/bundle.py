@@ -10,6 +10,8 @@ updated by left multiplication with ``exp(delta)``; deterministic (no randomness
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import cv2
 import numpy as np
 import scipy.sparse as sp
@@ -45,31 +47,73 @@ def bundle_adjust(
     observations ``uv`` (ideal px) of point ``obs_point`` in pose ``obs_pose``; returns the
     new (poses, X)."""
     poses, X = poses.copy(), X.copy()
-    nfree = int(np.count_nonzero(free))
-    if nfree == 0 or not len(uv) or not (np.isfinite(poses).all() and np.isfinite(X).all() and np.isfinite(uv).all()):
+    if not np.any(free) or not len(uv) or not (np.isfinite(poses).all() and np.isfinite(X).all() and np.isfinite(uv).all()):
         return poses, X
-    slot = np.cumsum(free) - 1  # index of a free pose among the free ones
-    P = len(X)
+    problem = _Problem(K, free, len(X), obs_pose, obs_point, uv, delta)
     lam = 1e-3
-
-    def evaluate(poses: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-        R, t = poses[obs_pose, :3, :3], poses[obs_pose, :3, 3]
-        Xc, r = _residuals(K, R, t, X[obs_point], uv)
-        return Xc, r, _robust_cost(r, delta)
-
-    Xc, r, cost = evaluate(poses, X)
-    n = len(uv)
-    sum_by_point = sp.csr_matrix((np.ones(n), (obs_point, np.arange(n))), shape=(P, n))
-    f = free[obs_pose]
-    k, i = np.flatnonzero(f), slot[obs_pose[f]]
-    p = obs_point[f]
-    sum_by_pose = sp.csr_matrix((np.ones(len(k)), (i, np.arange(len(k)))), shape=(nfree, len(k)))
-    eye3, eye6 = np.eye(3), np.eye(6)
-    block_rows = (3 * np.arange(P)[:, None, None] + np.arange(3)[None, :, None]).repeat(3, axis=2).ravel()
-    block_cols = (3 * np.arange(P)[:, None, None] + np.arange(3)[None, None, :]).repeat(3, axis=1).ravel()
+    Xc, r, cost = problem.evaluate(poses, X)
     for _ in range(iterations):
+        system = problem.linearise(poses, Xc, r)
+        for _attempt in range(4):
+            step = problem.solve(system, lam)
+            if step is None:  # singular: damp more
+                lam *= 10
+                continue
+            new_poses, new_X = problem.moved(poses, X, *step)
+            new_Xc, new_r, new_cost = problem.evaluate(new_poses, new_X)
+            if new_cost < cost:
+                poses, X, Xc, r, cost = new_poses, new_X, new_Xc, new_r, new_cost
+                lam = max(lam / 10, 1e-7)
+                break
+            lam *= 10
+        else:
+            break
+    return poses, X
+
+
+class _Normal(NamedTuple):
+    """The Gauss-Newton normal equations: point blocks ``V`` (Px3x3) and right side ``c``,
+    free-pose blocks ``U`` (Fx6x6) and ``b``, pose-point coupling ``Wm`` (6F x 3P, sparse)."""
+
+    V: np.ndarray
+    c: np.ndarray
+    U: np.ndarray
+    b: np.ndarray
+    Wm: sp.csr_matrix
+
+
+class _Problem:
+    """The fixed structure of one adjustment: who observes what, and the sparse sums over it."""
+
+    def __init__(
+        self, K: np.ndarray, free: np.ndarray, points: int, obs_pose: np.ndarray, obs_point: np.ndarray, uv: np.ndarray, delta: float
+    ):
+        self.K, self.free, self.P, self.delta = K, free, points, delta
+        self.obs_pose, self.obs_point, self.uv = obs_pose, obs_point, uv
+        self.nfree = int(np.count_nonzero(free))
+        slot = np.cumsum(free) - 1  # index of a free pose among the free ones
+        n, P = len(uv), points
+        self.sum_by_point = sp.csr_matrix((np.ones(n), (obs_point, np.arange(n))), shape=(P, n))
+        f = free[obs_pose]
+        self.k, self.i = np.flatnonzero(f), slot[obs_pose[f]]  # observations in free poses, their pose slots
+        p = obs_point[f]
+        self.sum_by_pose = sp.csr_matrix((np.ones(len(self.k)), (self.i, np.arange(len(self.k)))), shape=(self.nfree, len(self.k)))
+        self.block_rows = (3 * np.arange(P)[:, None, None] + np.arange(3)[None, :, None]).repeat(3, axis=2).ravel()
+        self.block_cols = (3 * np.arange(P)[:, None, None] + np.arange(3)[None, None, :]).repeat(3, axis=1).ravel()
+        self.coupling_rows = (6 * self.i[:, None, None] + np.arange(6)[None, :, None]).repeat(3, axis=2).ravel()
+        self.coupling_cols = (3 * p[:, None, None] + np.arange(3)[None, None, :]).repeat(6, axis=1).ravel()
+
+    def evaluate(self, poses: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+        """Camera-frame points, residuals (px) and robust cost of every observation."""
+        R, t = poses[self.obs_pose, :3, :3], poses[self.obs_pose, :3, 3]
+        Xc, r = _residuals(self.K, R, t, X[self.obs_point], self.uv)
+        return Xc, r, _robust_cost(r, self.delta)
+
+    def linearise(self, poses: np.ndarray, Xc: np.ndarray, r: np.ndarray) -> _Normal:
+        """The Huber-weighted (IRLS) normal equations at ``poses`` (``Xc``, ``r`` from ``evaluate``)."""
+        K, n, P, k = self.K, len(self.uv), self.P, self.k
         e = np.linalg.norm(r, axis=1)
-        w = np.where(e <= delta, 1.0, delta / np.maximum(e, 1e-12))  # Huber weights (IRLS)
+        w = np.where(e <= self.delta, 1.0, self.delta / np.maximum(e, 1e-12))  # Huber weights (IRLS)
         z = np.where(Xc[:, 2] > 1e-6, Xc[:, 2], 1e-6)
         x, y = Xc[:, 0], Xc[:, 1]
         dproj = np.zeros((n, 2, 3))
@@ -81,50 +125,47 @@ def bundle_adjust(
         skew[:, 2, 0], skew[:, 2, 1] = Xc[:, 1], -Xc[:, 0]
         skew[:, 0, 3] = skew[:, 1, 4] = skew[:, 2, 5] = 1.0
         Jc = dproj @ skew  # 2x6 per observation
-        Jx = dproj @ poses[obs_pose, :3, :3]  # 2x3
+        Jx = dproj @ poses[self.obs_pose, :3, :3]  # 2x3
         JxT = Jx.transpose(0, 2, 1) * w[:, None, None]
-        V = (sum_by_point @ (JxT @ Jx).reshape(n, 9)).reshape(P, 3, 3)
-        c = -(sum_by_point @ (JxT @ r[:, :, None]).reshape(n, 3))
+        V = (self.sum_by_point @ (JxT @ Jx).reshape(n, 9)).reshape(P, 3, 3)
+        c = -(self.sum_by_point @ (JxT @ r[:, :, None]).reshape(n, 3))
         JcT = Jc[k].transpose(0, 2, 1) * w[k, None, None]
-        U = (sum_by_pose @ (JcT @ Jc[k]).reshape(len(k), 36)).reshape(nfree, 6, 6)
-        b = -(sum_by_pose @ (JcT @ r[k, :, None]).reshape(len(k), 6))
-        rows = (6 * i[:, None, None] + np.arange(6)[None, :, None]).repeat(3, axis=2).ravel()
-        cols = (3 * p[:, None, None] + np.arange(3)[None, None, :]).repeat(6, axis=1).ravel()
-        Wm = sp.csr_matrix(((JcT @ Jx[k]).ravel(), (rows, cols)), shape=(6 * nfree, 3 * P))  # pose-point blocks
-        for _attempt in range(4):
-            Vd = V + lam * eye3 * np.maximum(np.einsum("nii->ni", V), 1e-9)[:, :, None] + 1e-9 * eye3
-            try:
-                Vinv = np.linalg.inv(Vd)
-            except np.linalg.LinAlgError:
-                lam *= 10
-                continue
-            Ud = U + lam * eye6 * np.maximum(np.einsum("nii->ni", U), 1e-9)[:, :, None]
-            Vm = sp.csr_matrix((Vinv.ravel(), (block_rows, block_cols)), shape=(3 * P, 3 * P))
-            Y = Wm @ Vm
-            S = -(Y @ Wm.T).toarray()  # sparse products: no multi-threaded BLAS for small sizes
-            for s in range(nfree):
-                S[6 * s : 6 * s + 6, 6 * s : 6 * s + 6] += Ud[s]
-            rhs = b.ravel() - Y @ c.ravel()
-            try:
-                dpose = np.linalg.solve(S, rhs)
-            except np.linalg.LinAlgError:
-                lam *= 10
-                continue
-            dpoint = (Vinv @ (c - (Wm.T @ dpose).reshape(P, 3))[:, :, None])[:, :, 0]
-            new_poses = poses.copy()
-            for s, idx in enumerate(np.flatnonzero(free)):
-                d = dpose[6 * s : 6 * s + 6]
-                step = np.eye(4)
-                step[:3, :3] = cv2.Rodrigues(d[:3])[0]
-                step[:3, 3] = d[3:]
-                new_poses[idx] = step @ poses[idx]
-            new_X = X + dpoint
-            new_Xc, new_r, new_cost = evaluate(new_poses, new_X)
-            if new_cost < cost:
-                poses, X, Xc, r, cost = new_poses, new_X, new_Xc, new_r, new_cost
-                lam = max(lam / 10, 1e-7)
-                break
-            lam *= 10
-        else:
-            break
-    return poses, X
+        U = (self.sum_by_pose @ (JcT @ Jc[k]).reshape(len(k), 36)).reshape(self.nfree, 6, 6)
+        b = -(self.sum_by_pose @ (JcT @ r[k, :, None]).reshape(len(k), 6))
+        Wm = sp.csr_matrix(((JcT @ Jx[k]).ravel(), (self.coupling_rows, self.coupling_cols)), shape=(6 * self.nfree, 3 * P))
+        return _Normal(V, c, U, b, Wm)
+
+    def solve(self, system: _Normal, lam: float) -> tuple[np.ndarray, np.ndarray] | None:
+        """(pose step 6F, point step Px3) of the system damped by ``lam`` (Schur complement on
+        the points), or ``None`` when it is singular."""
+        V, c, U, b, Wm = system
+        P, eye3, eye6 = self.P, np.eye(3), np.eye(6)
+        Vd = V + lam * eye3 * np.maximum(np.einsum("nii->ni", V), 1e-9)[:, :, None] + 1e-9 * eye3
+        try:
+            Vinv = np.linalg.inv(Vd)
+        except np.linalg.LinAlgError:
+            return None
+        Ud = U + lam * eye6 * np.maximum(np.einsum("nii->ni", U), 1e-9)[:, :, None]
+        Vm = sp.csr_matrix((Vinv.ravel(), (self.block_rows, self.block_cols)), shape=(3 * P, 3 * P))
+        Y = Wm @ Vm
+        S = -(Y @ Wm.T).toarray()  # sparse products: no multi-threaded BLAS for small sizes
+        for s in range(self.nfree):
+            S[6 * s : 6 * s + 6, 6 * s : 6 * s + 6] += Ud[s]
+        rhs = b.ravel() - Y @ c.ravel()
+        try:
+            dpose = np.linalg.solve(S, rhs)
+        except np.linalg.LinAlgError:
+            return None
+        dpoint = (Vinv @ (c - (Wm.T @ dpose).reshape(P, 3))[:, :, None])[:, :, 0]
+        return dpose, dpoint
+
+    def moved(self, poses: np.ndarray, X: np.ndarray, dpose: np.ndarray, dpoint: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The free poses left-multiplied by ``exp(dpose)`` and the points moved by ``dpoint``."""
+        new_poses = poses.copy()
+        for s, idx in enumerate(np.flatnonzero(self.free)):
+            d = dpose[6 * s : 6 * s + 6]
+            step = np.eye(4)
+            step[:3, :3] = cv2.Rodrigues(d[:3])[0]
+            step[:3, 3] = d[3:]
+            new_poses[idx] = step @ poses[idx]
+        return new_poses, X + dpoint

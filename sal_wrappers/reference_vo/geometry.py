@@ -1,225 +1,33 @@
-"""Geometry of the reference visual odometry: lens model, features, matching, depth, poses.
+"""Geometry of the reference visual odometry: depth of features, poses, projection, triangulation.
 
 Everything here is deterministic: fixed parameters, RANSAC with fixed iteration counts and
 OpenCV's fixed-seed generators, no randomised approximate search. Poses are 4x4 arrays;
-``T_cw`` maps world points into the camera, ``T_wc`` is its inverse (camera-to-world).
-
-Points live in two coordinate systems: ``xy`` are positions in the working image (the raw
-image, or the rectified left image of an unrectified stereo pair), ``pts`` the matching ideal
-pinhole pixels (``xy`` with lens distortion removed) that every geometric step uses with ``K``.
+``T_cw`` maps world points into the camera, ``T_wc`` is its inverse (camera-to-world). Pixels
+are ideal pinhole pixels (``pts``; see ``sal_wrappers.reference_vo.lens``).
 """
 
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
-from sal_adapters.compat import popcount, undistort_points_iter
-from sal_adapters.sequence import Sequence
+from sal_wrappers.reference_vo.features import Features, best_matches
+from sal_wrappers.reference_vo.lens import Lens
 
 __all__ = [
-    "Features",
-    "Lens",
-    "brute_match",
+    "backproject",
     "depth_points",
-    "detect",
-    "guided_match",
     "initial_pose",
     "invert",
-    "make_lens",
+    "matrix",
+    "project",
+    "project_each",
     "refine_pnp",
     "solve_pnp",
     "stereo_points",
     "triangulate",
 ]
-
-#: largest Hamming distance (of 256 bits) accepted for a match
-MAX_DISTANCE = 64
-#: best match must be this much better than the second best (ratio test)
-RATIO = 0.85
-
-
-@dataclass(frozen=True, eq=False)
-class Lens:
-    """The working camera: intrinsics ``K``, distortion of the working image (``None``: an
-    ideal pinhole), and for stereo the rectification of the pair.
-
-    Attributes:
-        K: 3x3 intrinsics of the working image (the rectified left camera for a rectified pair).
-        dist: distortion coefficients of the working image, or ``None``.
-        maps: ``cv2.remap`` maps (left, right) into the rectified pair; ``None`` when the raw
-            pair is rectified already (or for mono/RGB-D).
-        masks: uint8 masks (left, right) of the working images where features may be
-            detected (``None``: everywhere).
-        baseline: stereo baseline (m), 0 without stereo.
-        R_rect: rotation raw-left -> working camera (``x_work = R_rect x_raw``).
-    """
-
-    K: np.ndarray
-    dist: np.ndarray | None
-    maps: tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None
-    masks: tuple[np.ndarray | None, np.ndarray | None]
-    baseline: float
-    R_rect: np.ndarray
-
-    def undistort(self, xy: np.ndarray) -> np.ndarray:
-        """Ideal pinhole pixels (float64 Nx2) of working-image positions ``xy``."""
-        xy = np.asarray(xy, np.float64).reshape(-1, 2)
-        if self.dist is None or not len(xy):
-            return xy
-        return cv2.undistortPoints(xy[:, None, :], self.K, self.dist, P=self.K).reshape(-1, 2)
-
-    def distort(self, pts: np.ndarray) -> np.ndarray:
-        """Working-image positions (float64 Nx2) of ideal pinhole pixels ``pts`` (NaN stays)."""
-        pts = np.asarray(pts, np.float64).reshape(-1, 2)
-        if self.dist is None or not len(pts):
-            return pts
-        ok = np.isfinite(pts).all(axis=1)
-        out = np.full_like(pts, np.nan)
-        if ok.any():
-            rays = cv2.undistortPoints(pts[ok][:, None, :], self.K, None)  # normalised coordinates
-            rays = np.concatenate([rays.reshape(-1, 2), np.ones((int(ok.sum()), 1))], axis=1)
-            out[ok] = cv2.projectPoints(rays, np.zeros(3), np.zeros(3), self.K, self.dist)[0].reshape(-1, 2)
-        return out
-
-    def to_raw(self, T: np.ndarray) -> np.ndarray:
-        """Poses ``T`` (Nx4x4, working camera, world = first working camera) as raw-left
-        camera poses in the first raw-left camera's frame."""
-        C = np.eye(4)
-        C[:3, :3] = self.R_rect
-        return C.T @ T @ C
-
-
-def make_lens(sequence: Sequence, mode: str) -> Lens:
-    """The working camera of ``sequence`` in ``mode`` (``mono``, ``stereo``, ``rgbd``)."""
-    camera = sequence.camera
-    dist = np.array(camera.distortion, np.float64) if any(camera.distortion) else None
-    if mode != "stereo":
-        return Lens(camera.K, dist, None, (None, None), 0.0, np.eye(3))
-    from sal_modules.depth.stereo import stereo_rig
-
-    rig = stereo_rig(camera)
-    if rig.rectified:
-        return Lens(camera.K, None, None, (None, None), rig.baseline, np.eye(3))
-    K_rect, R_rect = _rectified_camera(rig.to_rectified["left"], rig.inside["left"], camera.K, dist)
-    kernel = np.ones((15, 15), np.uint8)
-    masks = tuple(cv2.erode(rig.inside[s], kernel, borderType=cv2.BORDER_CONSTANT, borderValue=0) * 255 for s in ("left", "right"))
-    return Lens(K_rect, None, (rig.to_rectified["left"], rig.to_rectified["right"]), masks, rig.baseline, R_rect)
-
-
-def _rectified_camera(
-    maps: tuple[np.ndarray, np.ndarray], inside: np.ndarray, K: np.ndarray, dist: np.ndarray | None
-) -> tuple[np.ndarray, np.ndarray]:
-    """Intrinsics ``K_rect`` and rotation ``R`` (raw -> rectified) of a rectification given by
-    its remap maps: rectified pixels ``q`` and the raw pixels they sample satisfy
-    ``q ~ K_rect R undistort(raw)``, a homography fitted exactly and split by RQ decomposition."""
-    v, u = np.nonzero(inside[::8, ::8])
-    u, v = u * 8, v * 8
-    raw = np.stack([maps[0][v, u], maps[1][v, u]], axis=1).astype(np.float64)
-    rays = undistort_points_iter(raw[:, None, :], K, dist, (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10))
-    H, _ = cv2.findHomography(rays.reshape(-1, 2), np.stack([u, v], axis=1).astype(np.float64), 0)
-    _, upper, rotation = cv2.RQDecomp3x3(H)[:3]
-    signs = np.diag(np.sign(np.diag(upper)))
-    upper, rotation = upper @ signs, signs @ rotation
-    if np.linalg.det(rotation) < 0:
-        rotation = -rotation
-    return upper / upper[2, 2], rotation
-
-
-# -- features --------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True, eq=False)
-class Features:
-    """Keypoints of one image: positions ``xy`` (float32 Nx2, working image), ideal pixels
-    ``pts`` (float64 Nx2), pyramid ``octave`` (int N) and ORB ``desc`` (uint8 Nx32 or ``None``)."""
-
-    xy: np.ndarray
-    pts: np.ndarray
-    octave: np.ndarray
-    desc: np.ndarray | None
-
-    def __len__(self) -> int:
-        return len(self.xy)
-
-    def take(self, index: np.ndarray) -> Features:
-        return Features(self.xy[index], self.pts[index], self.octave[index], None if self.desc is None else self.desc[index])
-
-
-def detect(orb: cv2.ORB, grey: np.ndarray, lens: Lens, stream: int = 0, mask: np.ndarray | None = None) -> Features:
-    """ORB keypoints and descriptors of ``grey`` (``stream`` 0: left, 1: right image) where
-    ``mask`` (default: the lens's) is not 0."""
-    keypoints, desc = orb.detectAndCompute(grey, lens.masks[stream] if mask is None else mask)
-    if not keypoints or desc is None:
-        return Features(np.zeros((0, 2), np.float32), np.zeros((0, 2)), np.zeros(0, np.int32), np.zeros((0, 32), np.uint8))
-    xy = np.array([k.pt for k in keypoints], np.float32)
-    octave = np.array([k.octave for k in keypoints], np.int32)
-    return Features(xy, lens.undistort(xy), octave, desc)
-
-
-def _hamming(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamming distances between (broadcast) descriptor arrays (..., 32) of uint8."""
-    a, b = np.ascontiguousarray(a).view(np.uint64), np.ascontiguousarray(b).view(np.uint64)
-    return popcount(np.bitwise_xor(a, b)).sum(axis=-1, dtype=np.int32)
-
-
-def _best(query: np.ndarray, train: np.ndarray, candidates: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per query row, the candidate (index into ``train``) that passes the distance and ratio
-    tests, or -1; ``candidates`` is NxK, ``valid`` marks real candidates. Each train
-    descriptor goes to at most one query (the nearest)."""
-    n = len(query)
-    if n == 0 or candidates.shape[1] == 0:
-        return np.full(n, -1, np.int64), np.zeros(n, np.int32)
-    safe = np.where(valid, candidates, 0)
-    dist = np.where(valid, _hamming(query[:, None, :], train[safe]), 1 << 20)
-    order = np.argsort(dist, axis=1, kind="stable")
-    rows = np.arange(n)
-    best = dist[rows, order[:, 0]]
-    second = dist[rows, order[:, 1]] if dist.shape[1] > 1 else np.full(n, 1 << 20)
-    ok = (best <= MAX_DISTANCE) & (best < RATIO * second)
-    match = np.where(ok, safe[rows, order[:, 0]], -1)
-    return _unique(match, best), best
-
-
-def _unique(match: np.ndarray, dist: np.ndarray) -> np.ndarray:
-    """Drop all but the nearest query of each train index in ``match`` (-1 = none)."""
-    hit = np.flatnonzero(match >= 0)
-    if not len(hit):
-        return match
-    order = hit[np.lexsort((dist[hit], match[hit]))]
-    keep = np.ones(len(order), bool)
-    keep[1:] = match[order[1:]] != match[order[:-1]]
-    out = np.full_like(match, -1)
-    out[order[keep]] = match[order[keep]]
-    return out
-
-
-def guided_match(desc: np.ndarray, predicted: np.ndarray, current: Features, radius: float, k: int = 8) -> np.ndarray:
-    """Match descriptors ``desc`` whose positions are predicted at ``predicted`` (Nx2 ideal
-    pixels, NaN: none) to the ``k`` nearest current keypoints within ``radius`` px; returns
-    the current index per row (-1: none)."""
-    out = np.full(len(desc), -1, np.int64)
-    rows = np.flatnonzero(np.isfinite(predicted).all(axis=1))
-    if not len(rows) or not len(current):
-        return out
-    k = min(k, len(current))
-    _, idx = cKDTree(current.pts).query(predicted[rows], k=k, distance_upper_bound=radius)
-    idx = idx.reshape(len(rows), k)
-    out[rows] = _best(desc[rows], current.desc, idx, idx < len(current))[0]
-    return out
-
-
-def brute_match(desc: np.ndarray, current: Features) -> np.ndarray:
-    """Match ``desc`` to every current descriptor (ratio test, one-to-one); index per row."""
-    out = np.full(len(desc), -1, np.int64)
-    if len(desc) == 0 or len(current) < 2:
-        return out
-    pairs = cv2.BFMatcher(cv2.NORM_HAMMING).knnMatch(desc, current.desc, k=2)
-    idx = np.array([[m.trainIdx for m in p] + [-1] * (2 - len(p)) for p in pairs], np.int64)
-    return _best(desc, current.desc, np.maximum(idx, 0), idx >= 0)[0]
 
 
 # -- depth -----------------------------------------------------------------------------------
@@ -266,7 +74,7 @@ def stereo_points(
     safe = np.where(valid, idx, 0)
     valid &= np.abs(right.octave[safe] - left.octave[:, None]) <= 1
     valid &= right.xy[safe, 0] < left.xy[:, None, 0]
-    match, _ = _best(left.desc, right.desc, safe, valid)
+    match, _ = best_matches(left.descriptors, right.descriptors, safe, valid)
     rows = np.flatnonzero(match >= 0)
     if not len(rows):
         return out

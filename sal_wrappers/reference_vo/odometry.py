@@ -9,7 +9,7 @@ A keyframe is made when the inliers drop below ``KEYFRAME_FRACTION`` of those of
 frame after the previous keyframe: it adds the keypoints no map point explains, with depth
 (RGB-D), stereo depth (stereo) or, for mono, triangulated against the two previous keyframes
 (keypoints that cannot be triangulated yet wait as candidates) and followed by a local bundle
-adjustment (``vo_bundle``) of the last ``WINDOW`` keyframes, the oldest ``FIXED`` of them held
+adjustment (``bundle``) of the last ``WINDOW`` keyframes, the oldest ``FIXED`` of them held
 fixed, which keeps the monocular scale from drifting. Map points not an inlier for
 ``MAX_UNSEEN`` frames are dropped.
 """
@@ -24,6 +24,8 @@ import numpy as np
 from sal_wrappers.base import TrackState
 from sal_wrappers.reference_vo import geometry as geo
 from sal_wrappers.reference_vo.bundle import bundle_adjust
+from sal_wrappers.reference_vo.features import Features, brute_match, detect, guided_match
+from sal_wrappers.reference_vo.lens import Lens
 
 __all__ = ["Odometry"]
 
@@ -39,17 +41,17 @@ CANDIDATE_KEYFRAMES = 2  #: mono: keyframes whose untriangulated keypoints are m
 WINDOW = 6  #: mono: keyframes in the local bundle adjustment
 FIXED = 2  #: mono: the oldest keyframes of the window, which stay fixed (fewer while the map is young)
 
-Update = tuple[int, int, int, "np.ndarray | None"]  # position, state, inliers, T_wc
+Update = tuple[int, TrackState, int, "np.ndarray | None"]  # position, state, inliers, T_wc
 
 
 class Odometry:
     """Visual odometry over one sequence; ``step`` takes the frames in order."""
 
-    def __init__(self, lens: geo.Lens, mode: str, size: tuple[int, int], *, features: int, min_inliers: int, tracker: str, max_lost: int):
+    def __init__(self, lens: Lens, mode: str, size: tuple[int, int], *, features: int, min_inliers: int, tracker: str, max_lost: int):
         self.lens, self.mode, self.tracker = lens, mode, tracker
         self.features, self.min_inliers, self.max_lost = features, min_inliers, max_lost
         self.width, self.height = size
-        self.orb = cv2.ORB_create(features, 1.2, 8, 19, 0, 2, cv2.ORB_HARRIS_SCORE, 31, 20)
+        self.orb = cv2.ORB.create(features, 1.2, 8, 19, 0, 2, cv2.ORB_HARRIS_SCORE, 31, 20)
         self.radius = max(10.0, 0.03 * self.width)
         self.segments = self.keyframes = self.frame = 0
         self._reset()
@@ -118,14 +120,14 @@ class Odometry:
         K = self.lens.K
         if self.tracker == "klt":
             ids, xy = self._flow(grey, np.flatnonzero(self.last >= 0), t)
-            current = geo.Features(xy, self.lens.undistort(xy), np.zeros(len(xy), np.int32), None)
+            current = Features(xy, self.lens.undistort(xy), np.zeros(len(xy), np.int32), None)
             cols = np.arange(len(ids))
         else:
-            current = geo.detect(self.orb, grey, self.lens)
+            current = detect(self.orb, grey, self.lens)
             ids, cols = self._match(current, self._predicted(t), self.radius)
             if len(ids) < 3 * self.min_inliers:
                 recent = np.flatnonzero(self.last >= self.frame - 3 - self.lost)
-                match = geo.brute_match(self.desc[recent], current)
+                match = brute_match(self.desc[recent], current)
                 ids, cols = recent[match >= 0], match[match >= 0]
         solved = geo.solve_pnp(K, self.X[ids], current.pts[cols], THRESHOLD_PX, 100)
         if solved is None:
@@ -144,10 +146,10 @@ class Odometry:
             self.last[np.setdiff1d(np.flatnonzero(self.last >= 0), ids)] = -1  # lost by the flow or an outlier
             self.track[ids] = current.xy[cols]
         else:
-            self.desc[ids] = current.desc[cols]
+            self.desc[ids] = current.descriptors[cols]
         return T_cw, len(ids), current, ids, cols
 
-    def _match(self, current: geo.Features, T_cw: np.ndarray, radius: float, k: int = 8) -> tuple[np.ndarray, np.ndarray]:
+    def _match(self, current: Features, T_cw: np.ndarray, radius: float, k: int = 8) -> tuple[np.ndarray, np.ndarray]:
         """Map points (ids) matched to current keypoints (rows) near their projections."""
         uv = geo.project(self.lens.K, T_cw, self.X)
         seen = (
@@ -158,7 +160,7 @@ class Odometry:
             & (uv[:, 1] < self.height + radius)
         )
         seen = np.flatnonzero(seen)
-        match = geo.guided_match(self.desc[seen], uv[seen], current, radius, k)
+        match = guided_match(self.desc[seen], uv[seen], current, radius, k)
         return seen[match >= 0], match[match >= 0]
 
     def _flow(self, grey: np.ndarray, ids: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
@@ -209,24 +211,28 @@ class Odometry:
                 self.pid[keep],
             )
 
-    def _measure(self, features: geo.Features, grey: np.ndarray, right_grey: np.ndarray | None, depth: np.ndarray | None) -> np.ndarray:
+    def _measure(self, features: Features, grey: np.ndarray, right_grey: np.ndarray | None, depth: np.ndarray | None) -> np.ndarray:
         """Camera-frame points of ``features`` from depth or stereo (NaN: unknown)."""
         if self.mode == "rgbd":
+            if depth is None:
+                raise ValueError("RGB-D odometry needs every frame's depth map")
             return geo.depth_points(self.lens, depth, features)
-        right = geo.detect(self.orb, right_grey, self.lens, stream=1)
+        if right_grey is None:
+            raise ValueError("stereo odometry needs every frame's right image")
+        right = detect(self.orb, right_grey, self.lens, stream=1)
         return geo.stereo_points(self.lens, features, right, grey, right_grey, max_disparity=grey.shape[1] / 3)
 
-    def _new_features(self, grey: np.ndarray, keep_xy: np.ndarray) -> geo.Features:
+    def _new_features(self, grey: np.ndarray, keep_xy: np.ndarray) -> Features:
         """KLT keyframes: ORB (FAST) keypoints at least 8 px from the points still followed."""
         mask = np.full(grey.shape, 255, np.uint8) if self.lens.masks[0] is None else self.lens.masks[0].copy()
         for x, y in np.rint(keep_xy).astype(int):
             cv2.circle(mask, (int(x), int(y)), 8, 0, -1)
-        return geo.detect(self.orb, grey, self.lens, mask=mask)
+        return detect(self.orb, grey, self.lens, mask=mask)
 
     def _keyframe(
         self,
         T_cw: np.ndarray,
-        current: geo.Features,
+        current: Features,
         ids: np.ndarray,
         cols: np.ndarray,
         grey: np.ndarray,
@@ -249,7 +255,7 @@ class Odometry:
         left = np.ones(len(fresh), bool)
         pool = self.candidates[-CANDIDATE_KEYFRAMES:]
         if pool and len(fresh):
-            match = geo.brute_match(np.concatenate([c["desc"] for c in pool]), fresh)
+            match = brute_match(np.concatenate([c["desc"] for c in pool]), fresh)
             start = np.cumsum([0] + [len(c["desc"]) for c in pool])
             for c, lo, hi in zip(pool, start[:-1], start[1:]):
                 rows = np.flatnonzero(match[lo:hi] >= 0)
@@ -257,13 +263,15 @@ class Odometry:
                 X = geo.triangulate(
                     self.lens.K, self.kf_poses[c["kf"]], T_cw, c["pts"][rows], fresh.pts[at], THRESHOLD_PX, TRIANGULATE_ANGLE_DEG
                 )
-                made, pids = self._add(X, fresh.desc[at], fresh.xy[at])
+                made, pids = self._add(X, fresh.descriptors[at], fresh.xy[at])
                 self._observe(c["kf"], pids, c["pts"][rows[made]])
                 self._observe(number, pids, fresh.pts[at[made]])
                 left[at[made]] = False
                 keep = np.setdiff1d(np.arange(len(c["desc"])), rows[made])
                 c["desc"], c["pts"] = c["desc"][keep], c["pts"][keep]
-        self.candidates = (self.candidates + [{"kf": number, "pts": fresh.pts[left], "desc": fresh.desc[left]}])[-CANDIDATE_KEYFRAMES:]
+        self.candidates = (self.candidates + [{"kf": number, "pts": fresh.pts[left], "desc": fresh.descriptors[left]}])[
+            -CANDIDATE_KEYFRAMES:
+        ]
         return self._adjust()
 
     def _observe(self, kf: int, pids: np.ndarray, pts: np.ndarray) -> None:
@@ -309,7 +317,7 @@ class Odometry:
         if self.tracker == "klt":
             features = self._new_features(grey, np.zeros((0, 2), np.float32))
         else:
-            features = geo.detect(self.orb, grey, self.lens)
+            features = detect(self.orb, grey, self.lens)
         X = self._measure(features, grey, right_grey, depth) if len(features) else np.zeros((0, 3))
         count = int(np.count_nonzero(np.isfinite(X[:, 0])))
         if count < 2 * self.min_inliers:
@@ -322,8 +330,8 @@ class Odometry:
 
     def _start_mono(self, pos: int, t: float, grey: np.ndarray) -> list[Update]:
         """Mono: wait for parallax against a reference frame, then triangulate the first map."""
-        not_yet = [(pos, TrackState.NOT_INITIALISED, 0, None)]
-        features = geo.detect(self.orb, grey, self.lens)
+        not_yet: list[Update] = [(pos, TrackState.NOT_INITIALISED, 0, None)]
+        features = detect(self.orb, grey, self.lens)
         init = self.init
         if len(features) < 4 * self.min_inliers:
             return not_yet
@@ -331,7 +339,7 @@ class Odometry:
             self.init = {"pos": pos, "t": t, "features": features, "grey": grey, "pending": []}
             return not_yet
         ref = init["features"]
-        match = geo.brute_match(ref.desc, features)
+        match = brute_match(ref.descriptors, features)
         rows, cols = np.flatnonzero(match >= 0), match[match >= 0]
         if len(rows) < 4 * self.min_inliers:
             self.init = {"pos": pos, "t": t, "features": features, "grey": grey, "pending": []}
@@ -344,7 +352,7 @@ class Odometry:
             else geo.triangulate(self.lens.K, np.eye(4), T21, ref.pts[rows], features.pts[cols], THRESHOLD_PX, INIT_ANGLE_DEG)
         )
         good = np.zeros(len(rows), bool) if X is None else np.isfinite(X[:, 0])
-        if np.count_nonzero(good) < max(3 * self.min_inliers, INIT_SHARE * len(rows)):
+        if T21 is None or X is None or np.count_nonzero(good) < max(3 * self.min_inliers, INIT_SHARE * len(rows)):
             init["pending"].append((pos, t, grey, features))
             return not_yet
         scale = 1.0 / np.median(X[good, 2])
@@ -352,7 +360,7 @@ class Odometry:
         pending = init["pending"]
         self._reset()
         self.started, self.segments, self.keyframes = True, self.segments + 1, self.keyframes + 2
-        _, pids = self._add(X, features.desc[cols], features.xy[cols])
+        _, pids = self._add(X, features.descriptors[cols], features.xy[cols])
         self.kf_poses = {0: np.eye(4), 1: T21}
         self._observe(0, pids, ref.pts[rows[good]])
         self._observe(1, pids, features.pts[cols[good]])
@@ -361,19 +369,19 @@ class Odometry:
         free = np.ones(len(features), bool)
         free[cols[good]] = False
         self.candidates = [
-            {"kf": 0, "pts": ref.pts[~used], "desc": ref.desc[~used]},
-            {"kf": 1, "pts": features.pts[free], "desc": features.desc[free]},
+            {"kf": 0, "pts": ref.pts[~used], "desc": ref.descriptors[~used]},
+            {"kf": 1, "pts": features.pts[free], "desc": features.descriptors[free]},
         ]
         self.reference = int(np.count_nonzero(good))
         self.t_last, self.prev_grey = init["t"], init["grey"]
         updates: list[Update] = [(init["pos"], TrackState.OK, self.reference, np.eye(4))]
         for p, _tp, _g, f in pending:  # the frames in between: matched to the new map
-            match = geo.brute_match(self.desc, f)
+            match = brute_match(self.desc, f)
             solved = geo.solve_pnp(self.lens.K, self.X[match >= 0], f.pts[match[match >= 0]], THRESHOLD_PX, 100)
-            ok = solved is not None and np.count_nonzero(solved[1]) >= self.min_inliers
-            updates.append(
-                (p, TrackState.OK, int(np.count_nonzero(solved[1])), geo.invert(solved[0])) if ok else (p, TrackState.LOST, 0, None)
-            )
+            if solved is not None and np.count_nonzero(solved[1]) >= self.min_inliers:
+                updates.append((p, TrackState.OK, int(np.count_nonzero(solved[1])), geo.invert(solved[0])))
+            else:
+                updates.append((p, TrackState.LOST, 0, None))
         self.T_cw, self.t_last, self.prev_grey = T21, t, grey
         self.velocity = np.zeros(6)
         if t > init["t"]:

@@ -1,6 +1,6 @@
 """``reference_vo``: the built-in, deterministic visual odometry (OpenCV only, in process).
 
-Algorithm (``sal_wrappers.reference_vo.odometry``, geometry in ``vo_geometry``, ``vo_bundle``). A local
+Algorithm (``odometry``; ``lens``, ``features``, ``geometry`` and ``bundle`` beside it). A local
 map of 3-D points with ORB descriptors is tracked frame by frame. ``tracker="orb"``: the
 frame's ORB keypoints are matched to the map points projected with the pose a
 constant-velocity model predicts (Hamming distance, ratio test, one-to-one; all keypoints when
@@ -13,7 +13,7 @@ below 70 % of those of the first frame after the previous keyframe; it adds the 
 map point explains: RGB-D with the depth at the keypoint (unless the depth jumps within
 3x3 px), stereo with ORB matching along the rectified rows refined to sub-pixel by
 Lucas-Kanade (pairs that are not rectified, EuRoC, are rectified with
-``sal_modules.depth.stereo.stereo_rig``), mono by triangulation against the two previous
+``sal_modules.depth.stereo_rig.stereo_rig``), mono by triangulation against the two previous
 keyframes, followed by a local bundle adjustment of the last six keyframes. Mono starts when
 a frame shows enough parallax against a reference frame: essential matrix, triangulated
 points scaled to a median depth of 1, then the frames in between are tracked against that
@@ -38,7 +38,7 @@ import time
 import traceback
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 import cv2
 import numpy as np
@@ -46,7 +46,7 @@ import numpy as np
 from sal_adapters import Sequence, Trajectory
 from sal_wrappers.base import RunResult, SlamSystem, SlamSystemError, TrackState, file_sha256
 from sal_wrappers.prefetch import prefetched
-from sal_wrappers.reference_vo import geometry as geo
+from sal_wrappers.reference_vo.lens import Lens, make_lens
 from sal_wrappers.reference_vo.odometry import Odometry
 
 __all__ = ["ReferenceVO"]
@@ -125,42 +125,25 @@ class ReferenceVO(SlamSystem):
         states = np.zeros(n, np.int8)
         poses: list[np.ndarray | None] = [None] * n
         segment = np.full(n, -1, np.int64)
-        track_time, failure, done = 0.0, None, 0
-        lens = odometry = None
+        failure: str | None = None
+        lens: Lens | None = None
+        odometry: Odometry | None = None
         cv2.setRNGSeed(0)
         with open(log_path, "w", encoding="utf-8") as log:
             log.write(
                 f"# reference_vo {mode} on {sequence.name}: {n} frames, options {self.options()}\n# frame timestamp state inliers ms\n"
             )
             try:
-                lens = geo.make_lens(sequence, mode)
+                lens = make_lens(sequence, mode)
                 size = (sequence.camera.width, sequence.camera.height) if lens.maps is None else lens.maps[0][0].shape[::-1]
                 odometry = Odometry(
                     lens, mode, size, features=self.features, min_inliers=self.min_inliers, tracker=self.tracker, max_lost=self.max_lost
                 )
             except Exception as exc:
                 failure = _failed(log, exc)
-            # decoding errors are the caller's, not the system's: they raise
-            for pos, timestamp, image, right, depth in prefetched(_decoded(sequence, mode)) if failure is None else ():
-                if timeout is not None and time.monotonic() - start > timeout:
-                    failure = f"timed out after {timeout:g} s"
-                    log.write(f"# {failure} at frame {pos}\n")
-                    break
-                t0 = time.perf_counter()
-                try:
-                    updates = odometry.step(pos, timestamp, image, right, depth)
-                except Exception as exc:
-                    failure = _failed(log, exc, pos)
-                    break
-                ms = (time.perf_counter() - t0) * 1000
-                track_time += ms / 1000
-                done = pos + 1
-                for p, state, inliers, T_wc in updates:
-                    states[p], poses[p], segment[p] = state, T_wc, odometry.segments - 1
-                    note = "" if p == pos else f" (frame {pos} started the map)"
-                    log.write(
-                        f"{p} {sequence.records[p].timestamp:.6f} {TrackState(state).name.lower()} {inliers} {ms if p == pos else 0:.1f}{note}\n"
-                    )
+            track_time, done = 0.0, 0
+            if failure is None and odometry is not None:
+                failure, done, track_time = _track_frames(sequence, mode, odometry, log, start, timeout, states, poses, segment)
             if done < n and odometry is not None and odometry.segments:
                 states[done:] = np.where(states[done:] == TrackState.OK, TrackState.OK, TrackState.LOST)
             trajectory, sizes = _largest_segment(sequence, lens, states, poses, segment)
@@ -199,6 +182,44 @@ class ReferenceVO(SlamSystem):
         )
 
 
+def _track_frames(
+    sequence: Sequence,
+    mode: str,
+    odometry: Odometry,
+    log: TextIO,
+    start: float,
+    timeout: float | None,
+    states: np.ndarray,
+    poses: list[np.ndarray | None],
+    segment: np.ndarray,
+) -> tuple[str | None, int, float]:
+    """Step ``odometry`` through the frames (decoded ahead), filling ``states``, ``poses`` and
+    ``segment`` by position and logging each frame; returns (failure, frames done, tracking
+    time in s). Decoding errors are the caller's, not the system's: they raise."""
+    failure, done, track_time = None, 0, 0.0
+    for pos, timestamp, image, right, depth in prefetched(_decoded(sequence, mode)):
+        if timeout is not None and time.monotonic() - start > timeout:
+            failure = f"timed out after {timeout:g} s"
+            log.write(f"# {failure} at frame {pos}\n")
+            break
+        t0 = time.perf_counter()
+        try:
+            updates = odometry.step(pos, timestamp, image, right, depth)
+        except Exception as exc:
+            failure = _failed(log, exc, pos)
+            break
+        ms = (time.perf_counter() - t0) * 1000
+        track_time += ms / 1000
+        done = pos + 1
+        for p, state, inliers, T_wc in updates:
+            states[p], poses[p], segment[p] = state, T_wc, odometry.segments - 1
+            note = "" if p == pos else f" (frame {pos} started the map)"
+            log.write(
+                f"{p} {sequence.records[p].timestamp:.6f} {TrackState(state).name.lower()} {inliers} {ms if p == pos else 0:.1f}{note}\n"
+            )
+    return failure, done, track_time
+
+
 def source_files() -> list[Path]:
     """The files whose code decides reference_vo's results: every module of this package."""
     return sorted(Path(__file__).resolve().parent.glob("*.py"))
@@ -216,19 +237,21 @@ def _integer(option: str, value: Any, lo: int, hi: int) -> int:
     return int(value)
 
 
-def _failed(log: Any, exc: Exception, pos: int | None = None) -> str:
+def _failed(log: TextIO, exc: Exception, pos: int | None = None) -> str:
     reason = f"{type(exc).__name__}: {exc}" + ("" if pos is None else f" (frame {pos})")
     log.write("# " + "".join(traceback.format_exception(exc)).replace("\n", "\n# ") + "\n")
     return reason
 
 
 def _largest_segment(
-    sequence: Sequence, lens: geo.Lens | None, states: np.ndarray, poses: list, segment: np.ndarray
+    sequence: Sequence, lens: Lens | None, states: np.ndarray, poses: list[np.ndarray | None], segment: np.ndarray
 ) -> tuple[Trajectory | None, list[int]]:
+    """The scored trajectory (the segment with the most tracked frames, raw-left camera poses;
+    ``None`` when nothing was tracked) and the tracked frames of each segment."""
     ok = states == TrackState.OK
     sizes = [int(np.count_nonzero(ok & (segment == s))) for s in range(int(segment.max()) + 1)] if len(segment) else []
-    if not sizes or max(sizes) == 0:
+    if lens is None or not sizes or max(sizes) == 0:  # no lens: no frame was tracked
         return None, sizes
     rows = np.flatnonzero(ok & (segment == int(np.argmax(sizes))))
-    T = lens.to_raw(np.stack([poses[r] for r in rows]))
+    T = lens.to_raw(np.stack([pose for r in rows if (pose := poses[r]) is not None]))  # every tracked frame has one
     return Trajectory.from_matrices(sequence.timestamps[rows], T), sizes
