@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import fnmatch
 import os
 import shutil
 from pathlib import Path
@@ -25,21 +26,36 @@ SHARED_DATA = Path(os.environ.get("SAL_TEST_DATA", Path(__file__).resolve().pare
 #: Test modules marked ``slow`` (``-m "not slow"`` leaves them out: .ci/lowest runs the rest).
 #: Serial times on a busy 2-core machine; the fast rest took about 345 s serially there.
 SLOW_MODULES = {
-    "test_orbslam3.py",  # real ORB-SLAM3 runs on synthetic, KITTI and EuRoC sequences (~110 s)
     "test_experiment_e2e.py",  # end-to-end experiments: perturb, evaluate, boundary with ORB-SLAM3 (~100 s)
     "test_experiment_fuzz.py",  # the config fuzz test, hundreds of generated and mutated configs (~45 s)
 }
-#: Single tests marked ``slow`` in otherwise fast modules, as ``module::name``.
-SLOW_TESTS = {
-    "test_plugin_requirements.py::test_orbslam3_through_the_plugin",  # a real ORB-SLAM3 boundary search (~55 s)
+#: Single tests marked ``slow`` in otherwise fast modules, as ``module::name`` (fnmatch patterns;
+#: the name without parameters matches every parametrisation).
+SLOW_TESTS: set[str] = set()
+#: Tests that run the real ORB-SLAM3 (pyorbslam3), marked ``real_slam`` and ``slow``, as
+#: ``module::name`` (fnmatch patterns; a parametrised test's name holds its ids).
+REAL_SLAM_TESTS = {
+    "test_orbslam3.py::test_orbslam3_real_*",  # synthetic, KITTI and EuRoC sequences, failures (~110 s)
+    "test_experiment_e2e.py::*orbslam3*",  # sal evaluate and sal boundary with --slam orbslam3
+    "test_plugin_requirements.py::test_orbslam3_through_the_plugin",  # a boundary search (~55 s)
 }
 
 
+def listed(item: pytest.Item, patterns: set[str]) -> bool:
+    """Whether ``module::name`` of ``item`` (with or without its parameter ids) matches a pattern."""
+    module = item.path.name
+    names = {f"{module}::{item.name}", f"{module}::{getattr(item, 'originalname', item.name)}"}
+    return any(fnmatch.fnmatchcase(name, pattern) for name in names for pattern in patterns)
+
+
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Mark the items of ``SLOW_MODULES`` and the ``SLOW_TESTS`` ``slow``."""
+    """Mark the ``REAL_SLAM_TESTS`` ``real_slam`` and ``slow``, and the items of ``SLOW_MODULES``
+    and the ``SLOW_TESTS`` ``slow``."""
     for item in items:
-        module = item.path.name
-        if module in SLOW_MODULES or f"{module}::{getattr(item, 'originalname', item.name)}" in SLOW_TESTS:
+        real_slam = listed(item, REAL_SLAM_TESTS)
+        if real_slam:
+            item.add_marker(pytest.mark.real_slam)
+        if real_slam or item.path.name in SLOW_MODULES or listed(item, SLOW_TESTS):
             item.add_marker(pytest.mark.slow)
 
 
