@@ -238,8 +238,6 @@ def test_second_run_reads_every_trial_from_the_cache(pytester: pytest.Pytester, 
         assert [(t["value"], t["passed"], t["metrics"]) for t in outcome["trials"]] == [
             (t["value"], t["passed"], t["metrics"]) for t in cold[name]["trials"]
         ]
-    spent = {name: [sum(t["wall_time_s"] for t in o["trials"]) for o in (cold[name], warm[name])] for name in cold}
-    assert all(warm_s < cold_s for cold_s, warm_s in spent.values()), spent
     n_meets = len(cold["test_meets"]["trials"])
     has_line(second, "test_meets", f"{n_meets} ({n_meets} cached)")
 
