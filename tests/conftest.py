@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-import fnmatch
 import os
+import re
 import shutil
 from pathlib import Path
 
@@ -26,26 +26,31 @@ SHARED_DATA = Path(os.environ.get("SAL_TEST_DATA", Path(__file__).resolve().pare
 #: Test modules marked ``slow`` (``-m "not slow"`` leaves them out: .ci/lowest runs the rest).
 #: Serial times on a busy 2-core machine; the fast rest took about 345 s serially there.
 SLOW_MODULES = {
-    "test_experiment_e2e.py",  # end-to-end experiments: perturb, evaluate, boundary with ORB-SLAM3 (~100 s)
+    "test_experiment_e2e.py",  # end-to-end experiments: perturb, evaluate, features (~60 s)
+    "test_experiment_e2e_boundary.py",  # boundary searches with both real systems (~40 s)
     "test_experiment_fuzz.py",  # the config fuzz test, hundreds of generated and mutated configs (~45 s)
 }
-#: Single tests marked ``slow`` in otherwise fast modules, as ``module::name`` (fnmatch patterns;
-#: the name without parameters matches every parametrisation).
+#: Single tests marked ``slow`` in otherwise fast modules, as ``module::name`` (``module::Class::name``
+#: in a class) patterns: ``*`` matches any text, and a name without its parameter ids matches
+#: every parametrisation.
 SLOW_TESTS: set[str] = set()
-#: Tests that run the real ORB-SLAM3 (pyorbslam3), marked ``real_slam`` and ``slow``, as
-#: ``module::name`` (fnmatch patterns; a parametrised test's name holds its ids).
+#: Tests that run the real ORB-SLAM3 (pyorbslam3), marked ``real_slam`` and ``slow``, as patterns
+#: like ``SLOW_TESTS``'s.
 REAL_SLAM_TESTS = {
     "test_orbslam3.py::test_orbslam3_real_*",  # synthetic, KITTI and EuRoC sequences, failures (~110 s)
-    "test_experiment_e2e.py::*orbslam3*",  # sal evaluate and sal boundary with --slam orbslam3
+    "test_experiment_e2e.py::TestEvaluateOrbslam3::*",  # sal evaluate --slam orbslam3
+    "test_experiment_e2e_boundary.py::TestBoundaryOrbslam3::*",  # sal boundary --slam orbslam3
     "test_plugin_requirements.py::test_orbslam3_through_the_plugin",  # a boundary search (~55 s)
 }
 
 
 def listed(item: pytest.Item, patterns: set[str]) -> bool:
-    """Whether ``module::name`` of ``item`` (with or without its parameter ids) matches a pattern."""
-    module = item.path.name
-    names = {f"{module}::{item.name}", f"{module}::{getattr(item, 'originalname', item.name)}"}
-    return any(fnmatch.fnmatchcase(name, pattern) for name in names for pattern in patterns)
+    """Whether ``module::name`` (``module::Class::name``) of ``item``, with or without its
+    parameter ids, matches one of ``patterns``, in which ``*`` matches any text."""
+    *classes, _ = item.nodeid.split("::")[1:]
+    where = "::".join([item.path.name, *classes])
+    names = {f"{where}::{item.name}", f"{where}::{getattr(item, 'originalname', item.name)}"}
+    return any(re.fullmatch(".*".join(map(re.escape, pattern.split("*"))), name) for name in names for pattern in patterns)
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
