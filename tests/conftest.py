@@ -5,7 +5,9 @@ from __future__ import annotations
 import os
 import re
 import shutil
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -88,6 +90,19 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
             item.add_marker(pytest.mark.slow)
 
 
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
+    """Under ``-n`` (xdist's ``--dist load``), send a test class, or a module's test functions, to
+    one worker (``loadscope``): a class-scoped fixture, such as the one real command of an
+    end-to-end test class, then runs once, not once per worker. Only for this suite (the example
+    suites keep xdist's default), and an explicit ``--dist`` other than load is kept."""
+    if config.getoption("dist") != "load":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    return LoadScopeScheduling(config, log)
+
+
 @pytest.fixture(scope="session")
 def shared_data() -> Path:
     """Root of the real dataset excerpts; tests that need it skip when it is absent."""
@@ -97,7 +112,7 @@ def shared_data() -> Path:
 
 
 @pytest.fixture(scope="session", autouse=True)
-def isolated_sal_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def isolated_sal_cache(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
     """Every test session renders and caches into its own folders, never the user's cache nor
     the checkout: ``sal`` commands run without ``--cache-dir`` use ``./.sal/cache``, which is
     redirected here (the plugin's ``<rootdir>/.sal/cache`` is left as it is)."""

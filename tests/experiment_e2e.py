@@ -3,8 +3,7 @@ test_experiment_e2e_boundary.py): the experiment config, and ``sal``, which runs
 this process and keeps what it printed, the SLAM runs it made and the files it wrote.
 
 Each command runs once, in a class-scoped fixture of the test class that asserts on its
-results; pyproject.toml sets ``--dist loadscope``, so under ``-n 2`` a class runs on one worker
-and no command runs twice.
+results; under ``-n 2`` tests/conftest.py sends a class to one worker, so no command runs twice.
 """
 
 from __future__ import annotations
@@ -53,7 +52,7 @@ PERTURBATIONS = ("fog", "fog_heavy", "rain", "rain_soiled_lens")
 MILD = ("fog", "rain", "rain_soiled_lens")
 #: 4 m visibility: the images are a flat grey; neither system tracks a frame (measured: 0/20)
 FAILING = "fog_heavy"
-BOUNDARY = {"name": "fog_visibility", "lower": 2, "upper": 500, "tolerance": 5, "max_iters": 4, "ate_rmse_fail": 0.5}
+BOUNDARY: dict[str, Any] = {"name": "fog_visibility", "lower": 2, "upper": 500, "tolerance": 5, "max_iters": 4, "ate_rmse_fail": 0.5}
 STEMS = [f"{i:06d}" for i in range(FRAMES)]
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
