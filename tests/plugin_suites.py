@@ -99,7 +99,7 @@ def junit(path: Path) -> dict[str, dict[str, str]]:
     """``{test name: {property: value}}`` from a JUnit XML file (``sal_outcome`` as JSON)."""
     found = {}
     for case in ET.parse(path).getroot().iter("testcase"):
-        found[case.get("name")] = {p.get("name"): p.get("value") for p in case.iter("property")}
+        found[case.get("name", "")] = {p.get("name", ""): p.get("value", "") for p in case.iter("property")}
     return found
 
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from pytest_sal.engine.outcome import Boundary, Outcome, Trial
+from pytest_sal.engine.outcome import Boundary, Outcome, Trial, TrialMetrics
 
 __all__ = ["FOG_REQ", "XSS_ID", "flaky", "fog", "m", "never_passed", "png", "rain", "regressed", "sweep_point"]
 
@@ -17,8 +17,9 @@ FOG_REQ = "ate_rmse < 1.5 m and tracking_rate >= 0.9 wherever fog.visibility_m >
 XSS_ID = "tests/robustness/test_weather.py::test_rain[<script>alert(1)</script>]"
 
 
-def m(ate: float | None, rate: float | None) -> dict[str, float | None]:
-    return {"ate_rmse": ate, "tracking_rate": rate, "rpe_trans": None, "rpe_rot": None, "scale_error": None}
+def m(ate: float | None, rate: float | None) -> TrialMetrics:
+    """A trial's metrics: ATE (m) and tracking rate; the other metrics not available."""
+    return TrialMetrics({"ate_rmse": ate, "tracking_rate": rate, "rpe_trans": None, "rpe_rot": None, "scale_error": None})
 
 
 def fog(artifacts_dir: Path | None = None) -> Outcome:

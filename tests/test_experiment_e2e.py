@@ -120,7 +120,9 @@ class TestPerturb:
         assert [row[0] for row in times] == STEMS and [float(row[2]) for row in times] == list(clean.timestamps)
         gt = Trajectory.read_tum(folder / "groundtruth.txt")
         np.testing.assert_allclose(gt.positions, clean.groundtruth.positions, atol=1e-12)
-        expected_frame = perturb(clean, build_modules(load_config(first.config))[name], seed=SEED)[0]
+        module = build_modules(load_config(first.config))[name]
+        assert module is not None
+        expected_frame = perturb(clean, module, seed=SEED)[0]
         written = copy[0]
         np.testing.assert_array_equal(written.image, expected_frame.image)
         np.testing.assert_array_equal(written.right, expected_frame.right)

@@ -28,6 +28,7 @@ from __future__ import annotations
 import copy
 import warnings
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -35,7 +36,7 @@ import pytest
 pytest.importorskip("pyorbslam3")
 
 from pytest_sal.analysis.metrics import evaluate
-from sal_adapters import Trajectory
+from sal_adapters import Sequence, Trajectory
 from sal_adapters.datasets import open_dataset
 from sal_wrappers import RunResult, SlamSystemError, TrackState, create
 from sal_wrappers import orbslam3 as orbslam3_module
@@ -48,8 +49,10 @@ OK, LOST, NI = ORB_STATES["OK"], ORB_STATES["LOST"], ORB_STATES["NOT_INITIALIZED
 
 
 # -- helpers ---------------------------------------------------------------------------------
-def ate(estimate: Trajectory, reference: Trajectory, sim3: bool) -> tuple[float, int]:
-    """Translation RMSE (m) after SE(3) or Sim(3) alignment, and the poses matched (evo)."""
+def ate(estimate: Trajectory | None, reference: Trajectory | None, sim3: bool) -> tuple[float, int]:
+    """Translation RMSE (m) after SE(3) or Sim(3) alignment, and the poses matched (evo); both
+    trajectories must be there."""
+    assert estimate is not None and reference is not None
     import evo.main_ape
     from evo.core import metrics, sync
 
@@ -68,12 +71,28 @@ def vocabulary(orb_vocabulary: Path) -> Path:
     return Path(orb_vocabulary)
 
 
-def _run(vocabulary: Path, sequence, workdir: Path, timeout: float | None = 300, **options) -> RunResult:
-    system = create("orbslam3", vocabulary=vocabulary, **options)
-    return system.run(sequence, workdir, timeout=timeout)
+def orbslam3(**options: Any) -> OrbSlam3:
+    """``create("orbslam3", **options)``, typed as what it makes."""
+    system = create("orbslam3", **options)
+    assert isinstance(system, OrbSlam3)
+    return system
 
 
-def _prerender(sequence) -> None:
+def why(result: RunResult) -> str:
+    """A failed run's reason and log tail, for an assertion message."""
+    return f"{result.failure}\n{result.log_tail}"
+
+
+def log_text(result: RunResult) -> str:
+    assert result.log_path is not None
+    return log_text(result)
+
+
+def _run(vocabulary: Path, sequence: Sequence, workdir: Path, timeout: float | None = 300, **options: Any) -> RunResult:
+    return orbslam3(vocabulary=vocabulary, **options).run(sequence, workdir, timeout=timeout)
+
+
+def _prerender(sequence: Sequence) -> None:
     """Render (and cache) synthetic frames first, so rendering does not share the CPU with ORB-SLAM3."""
     for frame in sequence:
         frame.image
@@ -91,9 +110,9 @@ def test_create_and_options() -> None:
     options = system.options()
     assert options["features"] == 2000 and options["pace"] is True and options["vocabulary"] is None
     assert system.pace_factor == 1.0
-    assert create("orbslam3", pace=2.5).pace_factor == 2.5
-    assert create("orbslam3", pace=False).pace_factor is None
-    assert options["load_retries"] == 2 and create("orbslam3", load_retries=0).load_retries == 0
+    assert orbslam3(pace=2.5).pace_factor == 2.5
+    assert orbslam3(pace=False).pace_factor is None
+    assert options["load_retries"] == 2 and orbslam3(load_retries=0).load_retries == 0
 
 
 def test_mode_must_fit_the_sequence() -> None:
@@ -114,7 +133,7 @@ def test_crash_while_saving_keeps_per_frame_results(tmp_path: Path) -> None:
         "final_saved": False,
     }
     outcome = ChildOutcome(record, -11, "killed by SIGSEGV (segmentation fault)", 3.0, tmp_path / "orbslam3.log", "Saving trajectory")
-    system = create("orbslam3")
+    system = orbslam3()
     header = {"settings": "s.yaml", "vocabulary": "v.txt"}
     result = system._result(sequence, "rgbd", outcome, header, tmp_path / "final.txt")
     assert not result.ok
@@ -122,7 +141,7 @@ def test_crash_while_saving_keeps_per_frame_results(tmp_path: Path) -> None:
         "killed by SIGSEGV (segmentation fault) while saving the final trajectory; the per-frame results of all 4 frames are kept and scored"
     )
     assert result.info["partial"] is True and result.info["written_before_failure"] is True and result.exit_status == -11
-    assert result.tracked == 2 and result.maps == 1 and len(result.trajectory) == 2
+    assert result.tracked == 2 and result.maps == 1 and result.trajectory is not None and len(result.trajectory) == 2
     assert result.final_trajectory is None
     assert result.track_time_s == pytest.approx(0.15)
     RunResult.from_json(result.to_json())  # JSON-ready
@@ -138,6 +157,7 @@ def test_a_crash_after_the_last_frame_is_scored(tmp_path: Path, phase: str, fram
     failure but is scored like a clean one (issue 12 point 8); a crash while tracking or a
     timeout is not."""
     sequence = open_dataset("synthetic", scene="indoor", frames=8, sensor="rgbd")
+    assert sequence.groundtruth is not None
     poses = [m.ravel().tolist() for m in sequence.groundtruth.matrices]
     record = {
         "phase": phase,
@@ -148,11 +168,11 @@ def test_a_crash_after_the_last_frame_is_scored(tmp_path: Path, phase: str, fram
     }
     failure = "timed out after 5 s and was killed" if timed_out else "killed by SIGSEGV (segmentation fault)"
     outcome = ChildOutcome(record, -11 if not timed_out else -9, failure, 3.0, tmp_path / "orbslam3.log", "", timed_out)
-    result = create("orbslam3")._result(sequence, "rgbd", outcome, {"settings": "s.yaml", "vocabulary": "v.txt"}, tmp_path / "final.txt")
+    result = orbslam3()._result(sequence, "rgbd", outcome, {"settings": "s.yaml", "vocabulary": "v.txt"}, tmp_path / "final.txt")
     metrics = evaluate(result, sequence.groundtruth)
     assert result.info["written_before_failure"] is scored and metrics.failure == result.failure
     if scored:
-        assert metrics.ate_rmse == pytest.approx(0.0, abs=1e-9) and result.failure.endswith(
+        assert metrics.ate_rmse == pytest.approx(0.0, abs=1e-9) and str(result.failure).endswith(
             "the per-frame results of all 8 frames are kept and scored"
         )
     else:
@@ -236,28 +256,28 @@ def test_run_that_fell_behind_without_retries_or_after_a_crash(monkeypatch: pyte
 
 # -- real ORB-SLAM3 runs ---------------------------------------------------------------------
 @pytest.fixture(scope="module")
-def urban_stereo(vocabulary: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[RunResult, object]:
+def urban_stereo(vocabulary: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[RunResult, Sequence]:
     sequence = open_dataset("synthetic", scene="urban", frames=100, sensor="stereo")
     _prerender(sequence)
     return _run(vocabulary, sequence, tmp_path_factory.mktemp("orb-urban")), sequence
 
 
 @pytest.fixture(scope="module")
-def indoor_rgbd(vocabulary: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[RunResult, object]:
+def indoor_rgbd(vocabulary: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[RunResult, Sequence]:
     sequence = open_dataset("synthetic", scene="indoor", frames=100, sensor="rgbd")
     _prerender(sequence)
     return _run(vocabulary, sequence, tmp_path_factory.mktemp("orb-indoor")), sequence
 
 
 @pytest.fixture(scope="module")
-def kitti_mono(vocabulary: Path, shared_data: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[RunResult, object]:
+def kitti_mono(vocabulary: Path, shared_data: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[RunResult, Sequence]:
     sequence = open_dataset("kitti", shared_data / "kitti" / "sequences" / "07")
     assert len(sequence) == 140
     return _run(vocabulary, sequence, tmp_path_factory.mktemp("orb-kitti"), features=2000, pace=True), sequence
 
 
 @pytest.fixture(scope="module")
-def euroc_stereo(vocabulary: Path, shared_data: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[RunResult, object]:
+def euroc_stereo(vocabulary: Path, shared_data: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[RunResult, Sequence]:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         sequence = open_dataset("euroc", shared_data / "euroc" / "V1_01_easy_micro", stereo=True)
@@ -274,9 +294,9 @@ def _report(result: RunResult, error: float | None = None) -> str:
     return text + (f"; ATE {error:.4f} m" if error is not None else "")
 
 
-def test_orbslam3_real_stereo_synthetic_urban(urban_stereo: tuple[RunResult, object]) -> None:
+def test_orbslam3_real_stereo_synthetic_urban(urban_stereo: tuple[RunResult, Sequence]) -> None:
     result, sequence = urban_stereo
-    assert result.ok, result.failure + "\n" + result.log_tail
+    assert result.ok, why(result)
     assert result.sensor == "stereo" and result.frames == 100 and result.exit_status == 0
     assert result.tracking_rate > 0.95, _report(result)
     error, matched = ate(result.trajectory, sequence.groundtruth, sim3=False)
@@ -284,7 +304,7 @@ def test_orbslam3_real_stereo_synthetic_urban(urban_stereo: tuple[RunResult, obj
     assert error < URBAN_ATE_BOUND_M, _report(result, error)  # measured 0.016-0.059 m over a 98 m path
 
 
-def test_orbslam3_real_stereo_synthetic_urban_result_fields(urban_stereo: tuple[RunResult, object]) -> None:
+def test_orbslam3_real_stereo_synthetic_urban_result_fields(urban_stereo: tuple[RunResult, Sequence]) -> None:
     result, sequence = urban_stereo
     assert result.scored == "online" and result.maps == 1
     np.testing.assert_array_equal(result.timestamps, sequence.timestamps)
@@ -297,27 +317,28 @@ def test_orbslam3_real_stereo_synthetic_urban_result_fields(urban_stereo: tuple[
     assert info["features"] == 2000 and info["phase"] == "done"
     assert info["attempts"][0]["pace"] == 1.0 and info["pace"] == info["attempts"][-1]["pace"]  # re-paced when the machine was busy
     assert info["load_time_s"] > 0 and info["track_ms_mean"] > 0
-    assert result.log_path.is_file() and "Vocabulary loaded" in result.log_path.read_text()
+    assert "Vocabulary loaded" in log_text(result)
     RunResult.from_json(result.to_json())
 
 
 def test_orbslam3_real_stereo_wrong_baseline_breaks_the_bound(
-    urban_stereo: tuple[RunResult, object], vocabulary: Path, tmp_path: Path
+    urban_stereo: tuple[RunResult, Sequence], vocabulary: Path, tmp_path: Path
 ) -> None:
     """The urban bound can fail: settings with a 2 % too long baseline scale the map by 2 %."""
     _, sequence = urban_stereo
+    assert sequence.camera.T_lr is not None
     T_left_right = sequence.camera.T_lr.copy()
     T_left_right[:3, 3] *= 1.02
     settings = write_settings(tmp_path / "wrong_baseline.yaml", sequence.camera.with_stereo(T_left_right), "stereo", 10.0)
     result = _run(vocabulary, sequence, tmp_path, settings=settings)
-    assert result.ok, result.failure + "\n" + result.log_tail
+    assert result.ok, why(result)
     error, _ = ate(result.trajectory, sequence.groundtruth, sim3=False)
     assert error > 2 * URBAN_ATE_BOUND_M, _report(result, error)  # measured 0.55 m
 
 
-def test_orbslam3_real_rgbd_synthetic_indoor(indoor_rgbd: tuple[RunResult, object]) -> None:
+def test_orbslam3_real_rgbd_synthetic_indoor(indoor_rgbd: tuple[RunResult, Sequence]) -> None:
     result, sequence = indoor_rgbd
-    assert result.ok, result.failure + "\n" + result.log_tail
+    assert result.ok, why(result)
     assert result.sensor == "rgbd" and result.maps == 1
     assert result.tracking_rate > 0.95, _report(result)
     error, _ = ate(result.trajectory, sequence.groundtruth, sim3=False)
@@ -326,19 +347,19 @@ def test_orbslam3_real_rgbd_synthetic_indoor(indoor_rgbd: tuple[RunResult, objec
     assert ate(result.final_trajectory, sequence.groundtruth, sim3=False)[0] < 0.05  # measured 0.005 m
 
 
-def test_orbslam3_real_mono_kitti07(kitti_mono: tuple[RunResult, object]) -> None:
+def test_orbslam3_real_mono_kitti07(kitti_mono: tuple[RunResult, Sequence]) -> None:
     result, sequence = kitti_mono
-    assert result.ok, result.failure + "\n" + result.log_tail
+    assert result.ok, why(result)
     assert result.sensor == "mono"
     assert result.tracked >= 130, _report(result)  # measured 136/140, first OK frame 4
-    assert result.first_tracked <= 10
+    assert result.first_tracked is not None and result.first_tracked <= 10
     error, matched = ate(result.trajectory, sequence.groundtruth, sim3=True)
-    assert matched == len(result.trajectory)
+    assert result.trajectory is not None and matched == len(result.trajectory)
     assert error <= 0.40, _report(result, error)  # measured 0.24-0.27 m over 78 m
     assert result.wall_time_s >= 13.0  # paced at ~9.6 Hz: 139 frame periods = 14.4 s
 
 
-def test_orbslam3_real_mono_kitti07_load_figures(kitti_mono: tuple[RunResult, object]) -> None:
+def test_orbslam3_real_mono_kitti07_load_figures(kitti_mono: tuple[RunResult, Sequence]) -> None:
     """Every real run says whether it kept up with the sensor clock; a re-paced one says so."""
     result, _ = kitti_mono
     load, attempts = result.load, result.info["attempts"]
@@ -359,7 +380,7 @@ def test_orbslam3_real_starved_run_is_re_paced(vocabulary: Path, shared_data: Pa
     more than half a period); the re-run just below the achieved rate (about 0.5x) gives the
     same time per frame, which the sensor clock now allows."""
     sequence = open_dataset("kitti", shared_data / "kitti" / "sequences" / "07", max_frames=60)
-    system = create("orbslam3", vocabulary=vocabulary, load_retries=2)
+    system = orbslam3(vocabulary=vocabulary, load_retries=2)
     system._stall_s = 0.15
     result = system.run(sequence, tmp_path, timeout=300)
     attempts = result.info["attempts"]
@@ -377,7 +398,7 @@ def test_orbslam3_real_starved_run_is_re_paced(vocabulary: Path, shared_data: Pa
     assert ("STARVED" in summary) if result.fell_behind else summary.endswith(f"re-paced at {result.load['pace']:g}x"), summary
 
 
-def test_orbslam3_real_mono_kitti07_final_trajectory(kitti_mono: tuple[RunResult, object]) -> None:
+def test_orbslam3_real_mono_kitti07_final_trajectory(kitti_mono: tuple[RunResult, Sequence]) -> None:
     result, sequence = kitti_mono
     final = result.final_trajectory
     assert final is not None and len(final) >= 130
@@ -390,11 +411,11 @@ def test_orbslam3_real_mono_kitti07_final_trajectory(kitti_mono: tuple[RunResult
     assert np.all(result.states[:first] == TrackState.NOT_INITIALISED)
 
 
-def test_orbslam3_real_stereo_euroc_unrectified(euroc_stereo: tuple[RunResult, object]) -> None:
+def test_orbslam3_real_stereo_euroc_unrectified(euroc_stereo: tuple[RunResult, Sequence]) -> None:
     result, sequence = euroc_stereo
-    assert result.ok, result.failure + "\n" + result.log_tail
+    assert result.ok, why(result)
     assert result.frames == 95 and result.tracked == 95, _report(result)
-    assert "Stereo baseline: 0.110078" in result.log_path.read_text()  # ORB-SLAM3 rectified the pair
+    assert "Stereo baseline: 0.110078" in log_text(result)  # ORB-SLAM3 rectified the pair
     error, matched = ate(result.trajectory, sequence.groundtruth, sim3=False)
     assert matched >= 70  # ground truth covers frames 21-94
     assert error < 0.005, _report(result, error)  # measured 0.7 mm: the camera stands still
@@ -422,7 +443,7 @@ def test_orbslam3_real_bad_settings_exit_255(vocabulary: Path, tmp_path: Path) -
     settings.write_text(text)
     result = _run(vocabulary, sequence, tmp_path / "run", settings=settings)
     assert not result.ok and result.exit_status == 255
-    assert "exit status 255" in result.failure and "while loading" in result.failure
+    assert result.failure is not None and "exit status 255" in result.failure and "while loading" in result.failure
     assert "Camera1.fx parameter must be a real number" in result.log_tail
     assert result.tracked == 0 and result.trajectory is None and not result.info["settings_generated"]
     assert result.frames == 3 and np.all(result.states == TrackState.NOT_INITIALISED)
@@ -447,7 +468,7 @@ def test_orbslam3_real_timeout_keeps_partial_results(vocabulary: Path, shared_da
         warnings.simplefilter("ignore")
         sequence = open_dataset("euroc", shared_data / "euroc" / "V1_01_easy_micro", stereo=True)
     result = _run(vocabulary, sequence, tmp_path, timeout=6.0, pace=0.5)  # 95 frames at 10 Hz: 9.4 s
-    assert not result.ok and "timed out after 6 s" in result.failure, result.failure
+    assert result.failure is not None and "timed out after 6 s" in result.failure, result.failure
     assert result.exit_status == -9
     assert "while tracking" in result.failure
     reported = result.info["frames_reported"]
@@ -456,7 +477,7 @@ def test_orbslam3_real_timeout_keeps_partial_results(vocabulary: Path, shared_da
     assert np.all(result.states[reported:] == TrackState.LOST)  # never reported after tracking
 
 
-def test_orbslam3_real_results_record_track_time(euroc_stereo: tuple[RunResult, object]) -> None:
+def test_orbslam3_real_results_record_track_time(euroc_stereo: tuple[RunResult, Sequence]) -> None:
     result, _ = euroc_stereo
     assert ms_per_frame(result) > 0  # measured 46-79 ms/frame; benchmarks/bench_systems.py times it
     assert result.track_time_s is not None and result.track_time_s < result.wall_time_s

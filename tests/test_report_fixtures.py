@@ -64,5 +64,6 @@ def test_fixtures_name_real_parameters_requirements_systems_and_datasets(outcome
         assert (line["label"], float(line["value"]), line["unit"]) == (outcome.parameter, outcome.edge, unit)
         assert (line["system"], line["dataset"]) == (outcome.system, outcome.dataset)
     if outcome.regression:
+        assert outcome.previous is not None
         previous = dataclasses.replace(outcome, boundary=outcome.previous, regression=None)
         assert "; ".join(regressions([parse_compare_fail("boundary:10%")], outcome, previous)) == outcome.regression
