@@ -72,8 +72,9 @@ def why(result: RunResult) -> str:
 
 
 def log_text(result: RunResult) -> str:
+    """The run's log (ORB-SLAM3's output)."""
     assert result.log_path is not None
-    return log_text(result)
+    return result.log_path.read_text()
 
 
 def _run(vocabulary: Path, sequence: Sequence, workdir: Path, timeout: float | None = 300, **options: Any) -> RunResult:
