@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import os
+import re
 import shutil
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -23,24 +26,81 @@ SHARED_DATA = Path(os.environ.get("SAL_TEST_DATA", Path(__file__).resolve().pare
 
 
 #: Test modules marked ``slow`` (``-m "not slow"`` leaves them out: .ci/lowest runs the rest).
-#: Serial times on a busy 2-core machine; the fast rest took about 345 s serially there.
+#: Serial times on the busy 2-core machine (load average about 4); the fast rest took about
+#: 250 s serially there, which is about 90 s with ``-n 2`` on a quiet one.
 SLOW_MODULES = {
-    "test_orbslam3.py",  # real ORB-SLAM3 runs on synthetic, KITTI and EuRoC sequences (~110 s)
-    "test_experiment_e2e.py",  # end-to-end experiments: perturb, evaluate, boundary with ORB-SLAM3 (~100 s)
+    "test_experiment_e2e.py",  # end-to-end experiments: perturb, evaluate, features (~70 s)
+    "test_experiment_e2e_boundary.py",  # boundary searches with both real systems (~55 s)
     "test_experiment_fuzz.py",  # the config fuzz test, hundreds of generated and mutated configs (~45 s)
 }
-#: Single tests marked ``slow`` in otherwise fast modules, as ``module::name``.
+#: Single tests marked ``slow`` in otherwise fast modules, as ``module::name`` (``module::Class::name``
+#: in a class) patterns: ``*`` matches any text, and a name without its parameter ids matches
+#: every parametrisation. Each module keeps a faster test of the same behaviour in the fast lane.
 SLOW_TESTS = {
-    "test_plugin_requirements.py::test_orbslam3_through_the_plugin",  # a real ORB-SLAM3 boundary search (~55 s)
+    "test_ci_recipe.py::TestGateScript::*",  # sal-gate.sh: 6 CI runs of an inner suite under -n 2 (51 s)
+    # inner sessions under -n 2 (their [serial] twins stay fast; test_plugin_usage keeps its [xdist] ones)
+    "test_plugin_history.py::test_history_warm_start_and_compare_fail[xdist]",  # (34 s)
+    "test_plugin_requirements.py::*[xdist]",  # verdicts 20 s, cache 7.5 s, flaky 5.1 s, sweep 2.6 s, systems 2.6 s
+    "test_pytest_html.py::*[xdist]",  # (5.0 s)
+    "test_plugin_live.py::*[xdist]",  # (3.4 s)
+    "test_outputs.py::test_kill_9_of_a_rerun_keeps_the_previous_output",  # (16 s)
+    "test_outputs.py::test_outputs_and_caches_get_the_umask_permissions[umask-077]",  # (4.0 s; umask 022 stays)
+    # the experiment folder the page tests share: sal perturb, evaluate, boundary and features (13 s setup)
+    "test_experiment_report.py::test_page_*",
+    "test_experiment_report.py::test_example_frames_show_the_same_moment_of_every_sequence",
+    "test_experiment_report.py::test_report_folder_can_be_moved_and_written_elsewhere",
+    "test_experiment_report.py::test_broken_and_missing_parts_are_named_and_the_rest_is_built",
+    "test_vocabulary.py::test_default_vocabulary",  # builds the k=10 L=6 ORB-SLAM3 vocabulary (10 s)
+    "test_modules_real_data.py::test_every_module_on_euroc_stereo[defocus]",  # (4.7 s)
+    "test_features.py::test_compare_features_writes_json_and_pngs",  # (3.6 s)
+    "test_reference_vo.py::test_kitti_07_mono",  # 140 real KITTI frames (3.5 s)
+    "test_evaluate_command.py::test_perturbed_frames_come_from_the_cache_sal_perturb_filled",  # (3.4 s)
+    "test_evaluate_command.py::test_a_failed_or_raising_run_is_recorded_and_the_rest_continues",  # (2.6 s)
+    "test_metrics.py::test_rpe_matches_evo_rpe_command_line[kitti00-orb-100m]",  # (2.0 s)
+    "test_example_configs.py::test_perturb_synthetic[urban_rain_blur.yaml]",  # (2.1 s)
+    "test_interrupt.py::test_ctrl_c_during_the_search_is_pytests_interrupted_summary[test_fog]",  # (3.1 s; test_point stays)
 }
+#: Tests that run the real ORB-SLAM3 (pyorbslam3), marked ``real_slam`` and ``slow``, as patterns
+#: like ``SLOW_TESTS``'s.
+REAL_SLAM_TESTS = {
+    "test_orbslam3.py::*",  # synthetic, KITTI and EuRoC sequences, failures (~110 s)
+    "test_experiment_e2e.py::TestEvaluateOrbslam3::*",  # sal evaluate --slam orbslam3
+    "test_experiment_e2e_boundary.py::TestBoundaryOrbslam3::*",  # sal boundary --slam orbslam3
+    "test_plugin_orbslam3.py::*",  # a boundary search through the plugin (~55 s)
+}
+
+
+def listed(item: pytest.Item, patterns: set[str]) -> bool:
+    """Whether ``module::name`` (``module::Class::name``) of ``item``, with or without its
+    parameter ids, matches one of ``patterns``, in which ``*`` matches any text."""
+    *classes, _ = item.nodeid.split("::")[1:]
+    where = "::".join([item.path.name, *classes])
+    names = {f"{where}::{item.name}", f"{where}::{getattr(item, 'originalname', item.name)}"}
+    return any(re.fullmatch(".*".join(map(re.escape, pattern.split("*"))), name) for name in names for pattern in patterns)
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Mark the items of ``SLOW_MODULES`` and the ``SLOW_TESTS`` ``slow``."""
+    """Mark the ``REAL_SLAM_TESTS`` ``real_slam`` and ``slow``, and the items of ``SLOW_MODULES``
+    and the ``SLOW_TESTS`` ``slow``."""
     for item in items:
-        module = item.path.name
-        if module in SLOW_MODULES or f"{module}::{getattr(item, 'originalname', item.name)}" in SLOW_TESTS:
+        real_slam = listed(item, REAL_SLAM_TESTS)
+        if real_slam:
+            item.add_marker(pytest.mark.real_slam)
+        if real_slam or item.path.name in SLOW_MODULES or listed(item, SLOW_TESTS):
             item.add_marker(pytest.mark.slow)
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
+    """Under ``-n`` (xdist's ``--dist load``), send a test class, or a module's test functions, to
+    one worker (``loadscope``): a class-scoped fixture, such as the one real command of an
+    end-to-end test class, then runs once, not once per worker. Only for this suite (the example
+    suites keep xdist's default), and an explicit ``--dist`` other than load is kept."""
+    if config.getoption("dist") != "load":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    return LoadScopeScheduling(config, log)
 
 
 @pytest.fixture(scope="session")
@@ -52,7 +112,7 @@ def shared_data() -> Path:
 
 
 @pytest.fixture(scope="session", autouse=True)
-def isolated_sal_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def isolated_sal_cache(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
     """Every test session renders and caches into its own folders, never the user's cache nor
     the checkout: ``sal`` commands run without ``--cache-dir`` use ``./.sal/cache``, which is
     redirected here (the plugin's ``<rootdir>/.sal/cache`` is left as it is)."""

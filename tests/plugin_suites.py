@@ -99,7 +99,7 @@ def junit(path: Path) -> dict[str, dict[str, str]]:
     """``{test name: {property: value}}`` from a JUnit XML file (``sal_outcome`` as JSON)."""
     found = {}
     for case in ET.parse(path).getroot().iter("testcase"):
-        found[case.get("name")] = {p.get("name"): p.get("value") for p in case.iter("property")}
+        found[case.get("name", "")] = {p.get("name", ""): p.get("value", "") for p in case.iter("property")}
     return found
 
 
@@ -132,3 +132,16 @@ def check_bracket(outcome: dict[str, Any], verdict: Callable[[float], bool], tol
     if tolerance is not None:
         assert outcome["termination"] == "tolerance"
         assert abs(pass_value - fail_value) <= tolerance
+
+
+def check_all(checks: dict[str, Callable[[], object]]) -> None:
+    """Run every check, then fail naming each one that failed, with its message: one failing
+    check does not hide the others. (The inner sessions they read are too costly to run once
+    per test function, and ``pytester`` cannot be shared between tests.)"""
+    failed = []
+    for name, check in checks.items():
+        try:
+            check()
+        except (AssertionError, pytest.fail.Exception) as exc:
+            failed.append(f"{name}: {exc}")
+    assert not failed, f"{len(failed)} of {len(checks)} checks failed:\n\n" + "\n\n".join(failed)

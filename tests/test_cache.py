@@ -309,6 +309,7 @@ CHILD = textwrap.dedent(
         def trial():
             Path(signal_file).touch()
             time.sleep(0.4)
+            Path(signal_file + ".raised").touch()
             raise RuntimeError("boom in child")
         cache.compute(key, trial)
     """
@@ -401,9 +402,14 @@ def test_waiter_computes_when_the_holder_fails(tmp_path: Path) -> None:
     key = _key(3)
     proc, started = _child(tmp_path, root, key, "raise")
     _wait_for(started, proc)  # the child holds the lock and is inside fn
-    t0 = time.monotonic()
-    data, cached = ContentCache(root).compute(key, lambda: {"by": "parent"})
-    assert time.monotonic() - t0 > 0.1  # it waited for the child
+    child_failed_first: list[bool] = []
+
+    def trial() -> dict[str, str]:
+        child_failed_first.append(Path(f"{started}.raised").exists())
+        return {"by": "parent"}
+
+    data, cached = ContentCache(root).compute(key, trial)
+    assert child_failed_first == [True]  # it waited for the child, then computed once
     assert (data, cached) == ({"by": "parent"}, False)
     _, err = proc.communicate(timeout=20)
     assert proc.returncode == 1 and "boom in child" in err

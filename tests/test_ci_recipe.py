@@ -16,8 +16,10 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
+import pytest
 import yaml
 
 from pytest_sal.history.run_history import History
@@ -120,43 +122,81 @@ def summary_since(project: Path, start: int) -> str:
     return (project / "step_summary.md").read_text()[start:]
 
 
-def test_gate_script_saves_the_baseline_and_fails_a_regressed_pull_request(tmp_path: Path) -> None:
-    suite = tmp_path / "suite"
+@dataclass
+class GateRuns:
+    """The gate's life in one project: main saves the baseline; a regressed pull request fails
+    twice; an improved one passes; with an empty history it passes, or fails when asked."""
+
+    project: Path
+    main: subprocess.CompletedProcess[str]
+    main_summary: str
+    after_main: list[str | None]
+    worse: list[subprocess.CompletedProcess[str]]
+    worse_summaries: list[str]
+    after_worse: list[str | None]
+    better: subprocess.CompletedProcess[str]
+    missing: subprocess.CompletedProcess[str]
+    strict: subprocess.CompletedProcess[str]
+
+
+@pytest.fixture(scope="class")
+def gate_runs(tmp_path_factory: pytest.TempPathFactory) -> GateRuns:
+    """Every gate run of ``GateRuns``, in order, once for the class (they share the history)."""
+    project = tmp_path_factory.mktemp("ci-project")
+    suite = project / "suite"
     write_suite(suite, BASELINE)
-
-    # a. main: the run is saved as 'main', the summary and the reports are written
-    main = gate(tmp_path, "main")
-    assert main.returncode == 0, main.stdout + main.stderr
-    assert "2 workers [1 item]" in main.stdout  # really under xdist
-    assert named(tmp_path) == ["main"]
-    summary = (tmp_path / "step_summary.md").read_text()
-    assert "| test | system | parameter |" in summary and "| `test_gate_suite.py::test_fog` | contrast |" in summary
-    assert (tmp_path / "out" / "report" / "index.html").is_file() and (tmp_path / "out" / "junit.xml").is_file()
-
-    # b. a worse program: the gate fails the test although its requirement holds; a rerun fails again
+    main = gate(project, "main")
+    main_summary, after_main = (project / "step_summary.md").read_text(), named(project)
     write_suite(suite, WORSE)
-    for attempt in range(2):
-        start = len((tmp_path / "step_summary.md").read_text())
-        worse = gate(tmp_path, "pr")
-        assert worse.returncode == 1, (attempt, worse.stdout + worse.stderr)
-        assert REGRESSION in worse.stdout and "limit 10 %" in worse.stdout
-        assert "REGRESSED" in summary_since(tmp_path, start)
-        assert "the main run saves the new baseline" in worse.stderr
-    assert named(tmp_path) == ["main", None, None]  # the regressed runs cannot become 'main'
-
-    # c. a better program passes
+    worse: list[subprocess.CompletedProcess[str]] = []
+    worse_summaries: list[str] = []
+    for _ in range(2):
+        start = len((project / "step_summary.md").read_text())
+        worse.append(gate(project, "pr"))
+        worse_summaries.append(summary_since(project, start))
+    after_worse = named(project)
     write_suite(suite, BETTER)
-    better = gate(tmp_path, "pr")
-    assert better.returncode == 0, better.stdout + better.stderr
+    better = gate(project, "pr")
+    (project / "empty").mkdir()
+    missing = gate(project, "pr", SAL_HISTORY="empty")
+    strict = gate(project, "pr", SAL_HISTORY="empty", SAL_COMPARE_MISSING="fail")
+    return GateRuns(project, main, main_summary, after_main, worse, worse_summaries, after_worse, better, missing, strict)
 
-    # d. no baseline (an empty history): said, and failed only when asked
-    (tmp_path / "empty").mkdir()
-    missing = gate(tmp_path, "pr", SAL_HISTORY="empty")
-    assert missing.returncode == 0, missing.stdout + missing.stderr
-    assert "not compared with 'main'" in missing.stdout
-    strict = gate(tmp_path, "pr", SAL_HISTORY="empty", SAL_COMPARE_MISSING="fail")
-    assert strict.returncode == 1, strict.stdout + strict.stderr
-    assert "--sal-compare-missing=fail" in strict.stdout
+
+class TestGateScript:
+    """``sal-gate.sh`` through one project's history (``gate_runs``), one result per test."""
+
+    def test_main_saves_the_baseline_and_writes_the_summary_and_reports(self, gate_runs: GateRuns) -> None:
+        main = gate_runs.main
+        assert main.returncode == 0, main.stdout + main.stderr
+        assert "2 workers [1 item]" in main.stdout  # really under xdist
+        assert gate_runs.after_main == ["main"]
+        assert "| test | system | parameter |" in gate_runs.main_summary
+        assert "| `test_gate_suite.py::test_fog` | contrast |" in gate_runs.main_summary
+        out = gate_runs.project / "out"
+        assert (out / "report" / "index.html").is_file() and (out / "junit.xml").is_file()
+
+    @pytest.mark.parametrize("attempt", [0, 1])
+    def test_a_regressed_pull_request_fails_and_again_on_a_rerun(self, gate_runs: GateRuns, attempt: int) -> None:
+        """A worse program: the gate fails the test although its requirement holds."""
+        worse = gate_runs.worse[attempt]
+        assert worse.returncode == 1, worse.stdout + worse.stderr
+        assert REGRESSION in worse.stdout and "limit 10 %" in worse.stdout
+        assert "REGRESSED" in gate_runs.worse_summaries[attempt]
+        assert "the main run saves the new baseline" in worse.stderr
+
+    def test_regressed_runs_cannot_become_main(self, gate_runs: GateRuns) -> None:
+        assert gate_runs.after_worse == ["main", None, None]
+
+    def test_an_improved_pull_request_passes(self, gate_runs: GateRuns) -> None:
+        assert gate_runs.better.returncode == 0, gate_runs.better.stdout + gate_runs.better.stderr
+
+    def test_no_baseline_is_said_and_fails_only_when_asked(self, gate_runs: GateRuns) -> None:
+        missing, strict = gate_runs.missing, gate_runs.strict
+        assert missing.returncode == 0, missing.stdout + missing.stderr
+        assert "not compared with 'main'" in missing.stdout
+        assert strict.returncode == 1, strict.stdout + strict.stderr
+        assert "--sal-compare-missing=fail" in strict.stdout
 
 
 def test_gate_script_that_ran_nothing_fails_with_the_reason(tmp_path: Path) -> None:

@@ -309,8 +309,7 @@ def test_timeout_kills_the_process_group(scripts, tiny, tmp_path):
     pid_file = tmp_path / "child.pid"
     system = create("command", argv=[sys.executable, str(scripts / "hang.py"), str(pid_file)], sensor="mono", layout="folder")
     result = system.run(tiny, tmp_path / "w", timeout=1.0)
-    assert result.failure == "timed out after 1 s and was killed"
-    assert result.wall_time_s < 1.0 + 4.0
+    assert result.failure == "timed out after 1 s and was killed"  # seconds to the result: benchmarks/bench_time_limits.py
     assert "tracking forever" in result.log_tail
     assert_gone(int(pid_file.read_text()))
 

@@ -337,9 +337,8 @@ def test_refuses_to_replace_a_folder_it_did_not_write(tmp_path: Path, capsys: py
     assert not (tmp_path / "out" / "exp" / "images" / "soil").exists() and not (tmp_path / "cache").exists()
 
 
-def test_hostile_configs_end_in_one_short_line_quickly(tmp_path: Path) -> None:
-    import time
-
+def test_hostile_configs_end_in_one_short_line(tmp_path: Path) -> None:
+    """The CPU time of each rejection (target: under 1 s) is benchmarks/bench_time_limits.py's."""
     # "billion laughs": nine levels of nine aliases (10^9 strings once expanded), before the config
     laughs = 'a: &a ["lol","lol","lol","lol","lol","lol","lol","lol","lol"]\n'
     laughs += "".join(f"{chr(98 + i)}: &{chr(98 + i)} [{','.join(['*' + chr(97 + i)] * 9)}]\n" for i in range(8))
@@ -360,9 +359,7 @@ def test_hostile_configs_end_in_one_short_line_quickly(tmp_path: Path) -> None:
         valid.replace("tolerance: 5", "tolerance: .nan"): "robustness_boundary.tolerance: nan is not valid; must be a number > 0",
     }
     for text, message in cases.items():
-        start = time.process_time()  # CPU time: the bound does not move with the load
         error = error_of(tmp_path, text)
-        assert time.process_time() - start < 1.0, message
         assert message in error and "\n" not in error and len(error) < 400, error
 
 

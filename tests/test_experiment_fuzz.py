@@ -491,18 +491,19 @@ def test_mutated_yaml_ends_in_a_plan_or_one_line(workdir: Path, data: bytes) -> 
     check(data, workdir, "yaml text")
 
 
-def test_alias_bomb_is_one_line_in_under_a_second(workdir: Path) -> None:
-    """Nine levels of nine aliases (10^9 strings once expanded) before a valid config."""
+def test_alias_bomb_is_one_line_in_under_20_mib(workdir: Path) -> None:
+    """Nine levels of nine aliases (10^9 strings once expanded) before a valid config; its CPU
+    time (target: under 1 s) is benchmarks/bench_time_limits.py's."""
     data = (alias_bomb(9) + (EXAMPLES / "fog_rain_urban.yaml").read_text()).encode()
     tracemalloc.start()
-    started = time.process_time()  # CPU time: the bound holds on a loaded machine too
+    started = time.process_time()  # CPU time, for the tally only
     message = check(data, workdir, "alias bomb")
     seconds = time.process_time() - started
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
     TALLY["alias bomb ms"] = round(1000 * seconds)
     TALLY["alias bomb peak KiB"] = peak // 1024
-    assert seconds < 1.0 and peak < 20 * 2**20
+    assert peak < 20 * 2**20
     assert message == "c.yaml:6: holds more than 100000 values once its YAML aliases are expanded; a config needs a few hundred"
 
 

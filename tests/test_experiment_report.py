@@ -18,7 +18,7 @@ import pytest
 import yaml
 from browser import find_picture, needs_chromium, screenshot
 
-from pytest_sal.cli.main import main
+from pytest_sal.cli.main import build_parser, main
 from pytest_sal.experiment.boundary_summary import read_boundary_summary
 from pytest_sal.experiment.config import build_sequence, load_config
 from pytest_sal.report.experiment_frames import THUMBNAIL_WIDTH
@@ -27,6 +27,8 @@ from sal_adapters import SalError
 from sal_adapters.images import read_image
 
 FRAMES = 8
+#: the commands the page suggests for a part not made yet, as it writes them
+SUGGESTED = {"evaluate": "sal evaluate CONFIG --slam NAME", "features": "sal features CONFIG --features orb"}
 CONFIG = {
     "experiment": {"name": "report_demo", "seed": 3},
     "dataset": {"type": "synthetic", "max_frames": FRAMES, "options": {"scene": "urban", "frames": FRAMES}},
@@ -182,7 +184,7 @@ def test_broken_and_missing_parts_are_named_and_the_rest_is_built(experiment: Pa
     )
     assert warnings == [expected]
     assert "<h2>Left out</h2>" in text and "unreadable: slam_results/reference_vo/metrics/summary.json" in text
-    assert "no feature tracking: run <code>sal features CONFIG --features orb</code>" in text
+    assert f"no feature tracking: run <code>{SUGGESTED['features']}</code>" in text
     assert text.count(f"<figure style='width: {THUMBNAIL_WIDTH}px'>") == 3 and "fog_visibility" in text  # frames and boundary still there
 
 
@@ -221,7 +223,7 @@ def test_report_on_real_kitti_frames(shared_data: Path, tmp_path: Path) -> None:
     middle = build_sequence(load_config(config))[2].image
     assert np.array_equal(clean, cv2.resize(middle, clean.shape[1::-1], interpolation=cv2.INTER_AREA))
     assert (clean[..., 0] == clean[..., 1]).all()  # grey KITTI, expanded to RGB
-    assert np.abs(soiled - clean).mean() > 1.0 and "no SLAM runs: run <code>sal evaluate CONFIG --slam NAME</code>" in page.read_text()
+    assert np.abs(soiled - clean).mean() > 1.0 and f"no SLAM runs: run <code>{SUGGESTED['evaluate']}</code>" in page.read_text()
 
 
 def test_report_of_a_config_with_timestamped_folders_takes_the_newest(tmp_path: Path) -> None:
@@ -232,3 +234,14 @@ def test_report_of_a_config_with_timestamped_folders_takes_the_newest(tmp_path: 
     for stamp in ("20261201_090000", "20261201_101500", "20261130_235959"):
         (tmp_path / "out" / f"report_demo_{stamp}" / "features").mkdir(parents=True)
     assert write_experiment_report(config, warn=print) == tmp_path / "out" / "report_demo_20261201_101500" / "report" / "index.html"
+
+
+@pytest.mark.parametrize("command", SUGGESTED.values())
+def test_the_commands_the_page_suggests_are_real(command: str) -> None:
+    """Each parses with the real ``sal`` parser (CONFIG and NAME filled in): a renamed command or
+    option breaks this test, not a reader following the page."""
+    args = command.replace("CONFIG", "exp.yaml").replace("NAME", "reference_vo").split()[1:]
+    try:
+        build_parser().parse_args(args)
+    except SystemExit:
+        pytest.fail(f"sal cannot parse {command!r}")

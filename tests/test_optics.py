@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from functools import cache
 from pathlib import Path
 
@@ -94,12 +93,12 @@ def test_soiling_rejects_inverted_ranges() -> None:
 # -- cracked_lens ----------------------------------------------------------------------------------
 
 
-def test_crack_pattern_is_generated_in_well_under_a_second() -> None:
-    module = ready("cracked_lens")
-    start = time.process_time()  # CPU time: the bound does not move with the load
-    module.build("left", *KITTI_SIZE)
-    elapsed = time.process_time() - start
-    assert elapsed < 1.0, f"crack generation at 1241x376 took {elapsed:.2f} s"
+def test_crack_pattern_is_built_at_the_frame_size() -> None:
+    """Its CPU time at 1241x376 (target: well under 1 s) is benchmarks/bench_time_limits.py's."""
+    built = ready("cracked_lens").build("left", *KITTI_SIZE)
+    assert built is not None  # the default force breaks the glass
+    cracks, _ = built
+    assert cracks.alpha.shape == KITTI_SIZE and 0.0 < cracks.alpha.mean() < 0.5
 
 
 def test_crack_path_choice_does_not_depend_on_the_force() -> None:

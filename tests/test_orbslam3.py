@@ -1,4 +1,6 @@
-"""The ``orbslam3`` system: settings files, options, state mapping, and real ORB-SLAM3 runs.
+"""Real ORB-SLAM3 runs of the ``orbslam3`` system (``pyorbslam3``). Its options, result assembly
+and re-pacing with a fake child are in test_orbslam3_results.py; its settings files, option
+checks and state mapping, which need no ``pyorbslam3``, in test_orbslam3_settings.py.
 
 The real runs (``test_orbslam3_real_*``) each run one configuration once in a module-scoped
 fixture that several tests assert on. Measured on the 2-core workplace machine (self-built
@@ -26,74 +28,26 @@ from __future__ import annotations
 import copy
 import warnings
 from pathlib import Path
+from typing import Any
 
-import cv2
 import numpy as np
 import pytest
 
 pytest.importorskip("pyorbslam3")
 
-from pytest_sal.analysis.metrics import evaluate
-from sal_adapters import Camera, Trajectory
+from sal_adapters import Sequence, Trajectory
 from sal_adapters.datasets import open_dataset
-from sal_wrappers import RunResult, SlamSystemError, TrackState, create
-from sal_wrappers import orbslam3 as orbslam3_module
-from sal_wrappers.child_process import ChildOutcome
+from sal_wrappers import RunResult, TrackState, create
 from sal_wrappers.orbslam3 import OrbSlam3
-from sal_wrappers.orbslam3_settings import (
-    VIEWER_KEYS,
-    Matrix,
-    OrbParameters,
-    format_value,
-    settings_entries,
-    settings_yaml,
-    write_settings,
-)
-from sal_wrappers.orbslam3_states import ORB_STATES, map_states, read_final_trajectory, segment_ids
+from sal_wrappers.orbslam3_settings import settings_yaml, write_settings
 from sal_wrappers.pacing import repace
-
-OK, RL, LOST = ORB_STATES["OK"], ORB_STATES["RECENTLY_LOST"], ORB_STATES["LOST"]
-NI, NIY = ORB_STATES["NOT_INITIALIZED"], ORB_STATES["NO_IMAGES_YET"]
-
-REAL_KEYS = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2")
-INT_KEYS = (
-    "Camera.width",
-    "Camera.height",
-    "Camera.fps",
-    "Camera.RGB",
-    "ORBextractor.nFeatures",
-    "ORBextractor.nLevels",
-    "ORBextractor.iniThFAST",
-    "ORBextractor.minThFAST",
-)
 
 
 # -- helpers ---------------------------------------------------------------------------------
-def read_back(path: Path) -> cv2.FileStorage:
-    """The settings file as ORB-SLAM3 reads it (cv::FileStorage: real and int are distinct)."""
-    storage = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-    assert storage.isOpened()
-    return storage
-
-
-def assert_types(storage: cv2.FileStorage, text: str) -> None:
-    """Every key of the file has the type ORB-SLAM3 insists on."""
-    keys = [line.split(":")[0] for line in text.splitlines()[1:] if line and not line.startswith(" ")]
-    for key in keys:
-        node = storage.getNode(key)
-        assert not node.empty(), key
-        if key in INT_KEYS:
-            assert node.isInt(), key
-        elif key in ("File.version", "Camera.type"):
-            assert node.isString(), key
-        elif key == "Stereo.T_c1_c2":
-            assert node.isMap(), key
-        else:
-            assert node.isReal(), key
-
-
-def ate(estimate: Trajectory, reference: Trajectory, sim3: bool) -> tuple[float, int]:
-    """Translation RMSE (m) after SE(3) or Sim(3) alignment, and the poses matched (evo)."""
+def ate(estimate: Trajectory | None, reference: Trajectory | None, sim3: bool) -> tuple[float, int]:
+    """Translation RMSE (m) after SE(3) or Sim(3) alignment, and the poses matched (evo); both
+    trajectories must be there."""
+    assert estimate is not None and reference is not None
     import evo.main_ape
     from evo.core import metrics, sync
 
@@ -112,12 +66,22 @@ def vocabulary(orb_vocabulary: Path) -> Path:
     return Path(orb_vocabulary)
 
 
-def _run(vocabulary: Path, sequence, workdir: Path, timeout: float | None = 300, **options) -> RunResult:
-    system = create("orbslam3", vocabulary=vocabulary, **options)
-    return system.run(sequence, workdir, timeout=timeout)
+def why(result: RunResult) -> str:
+    """A failed run's reason and log tail, for an assertion message."""
+    return f"{result.failure}\n{result.log_tail}"
 
 
-def _prerender(sequence) -> None:
+def log_text(result: RunResult) -> str:
+    """The run's log (ORB-SLAM3's output)."""
+    assert result.log_path is not None
+    return result.log_path.read_text()
+
+
+def _run(vocabulary: Path, sequence: Sequence, workdir: Path, timeout: float | None = 300, **options: Any) -> RunResult:
+    return create("orbslam3", vocabulary=vocabulary, **options).run(sequence, workdir, timeout=timeout)
+
+
+def _prerender(sequence: Sequence) -> None:
     """Render (and cache) synthetic frames first, so rendering does not share the CPU with ORB-SLAM3."""
     for frame in sequence:
         frame.image
@@ -127,327 +91,30 @@ def _prerender(sequence) -> None:
             frame.depth
 
 
-# -- settings files --------------------------------------------------------------------------
-def test_format_value_reals_ints_strings() -> None:
-    assert format_value(500.0) == "500.0"
-    assert format_value(500) == "500"
-    assert format_value(np.float64(0.0)) == "0.0"
-    assert format_value(np.int64(7)) == "7"
-    assert format_value(1.76187114e-05) == "1.76187114e-05"
-    assert format_value(1e16) == "1e+16"
-    assert format_value(True) == "1"
-    assert format_value("1.0") == '"1.0"'
-    assert format_value(Matrix(np.eye(2))).endswith("data: [1.0, 0.0, 0.0, 1.0]")
-    with pytest.raises(ValueError, match="non-finite"):
-        format_value(float("nan"))
-    with pytest.raises(TypeError):
-        format_value([1.0])  # type: ignore[arg-type]
-
-
-def test_settings_mono_types_and_keys(tmp_path: Path) -> None:
-    camera = Camera(fx=707.0912, fy=707.0912, cx=601.8873, cy=183.1104, width=1226, height=370)
-    path = write_settings(tmp_path / "mono.yaml", camera, "mono", 9.615384, OrbParameters(features=2000))
-    text = path.read_text()
-    assert text.startswith("%YAML:1.0\n")
-    storage = read_back(path)
-    assert_types(storage, text)
-    assert storage.getNode("File.version").string() == "1.0"
-    assert storage.getNode("Camera.type").string() == "PinHole"
-    assert storage.getNode("Camera.fps").real() == 10  # rounded
-    assert storage.getNode("Camera1.fx").real() == pytest.approx(707.0912)
-    assert storage.getNode("Camera1.k1").real() == 0.0  # no distortion: zeros
-    assert storage.getNode("ORBextractor.nFeatures").real() == 2000
-    for key, value in VIEWER_KEYS:
-        assert storage.getNode(key).real() == pytest.approx(value)
-    for key in ("Camera2.fx", "Stereo.T_c1_c2", "Stereo.ThDepth", "Stereo.b", "RGBD.DepthMapFactor", "Camera1.k3"):
-        assert storage.getNode(key).empty(), key
-    # the same text through a plain YAML parser, without the %YAML line
-    import yaml
-
-    data = yaml.safe_load(text.split("\n", 1)[1])
-    assert isinstance(data["Camera1.fx"], float) and isinstance(data["Camera.width"], int)
-    assert all(isinstance(data[k], float) for k, _ in VIEWER_KEYS)
-
-
-def test_settings_stereo_from_euroc_camera(shared_data: Path, tmp_path: Path) -> None:
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        sequence = open_dataset("euroc", shared_data / "euroc" / "V1_01_easy_micro", stereo=True)
-    camera = sequence.camera
-    path = write_settings(tmp_path / "stereo.yaml", camera, "stereo", sequence.fps, OrbParameters(th_depth=60.0))
-    text = path.read_text()
-    storage = read_back(path)
-    assert_types(storage, text)
-    assert storage.getNode("Camera.fps").real() == 20
-    for i, key in enumerate(REAL_KEYS):
-        left = [camera.fx, camera.fy, camera.cx, camera.cy, *camera.distortion][i]
-        right = [camera.right.fx, camera.right.fy, camera.right.cx, camera.right.cy, *camera.right.distortion][i]
-        assert storage.getNode(f"Camera1.{key}").real() == left
-        assert storage.getNode(f"Camera2.{key}").real() == right
-    assert camera.right.fx != camera.fx  # unrectified: the right camera's own intrinsics
-    assert storage.getNode("Stereo.ThDepth").real() == 60.0
-    T = storage.getNode("Stereo.T_c1_c2").mat()
-    assert T.shape == (4, 4)
-    np.testing.assert_allclose(T, camera.T_lr, atol=1e-7)  # pose of camera 2 in camera 1
-    assert T[0, 3] == pytest.approx(0.110074, abs=1e-6)
-    assert "!!opencv-matrix\n  rows: 4\n  cols: 4\n  dt: f\n" in text
-    for key in ("Stereo.b", "RGBD.DepthMapFactor"):
-        assert storage.getNode(key).empty()
-
-
-def test_settings_rectified_stereo_copies_camera1() -> None:
-    camera = Camera(fx=500.0, fy=500.0, cx=320.0, cy=240.0, width=640, height=480, baseline_m=0.2)
-    entries = dict(settings_entries(camera, "stereo", 30.0))
-    assert entries["Camera2.fx"] == 500.0 and entries["Camera2.k1"] == 0.0
-    np.testing.assert_array_equal(entries["Stereo.T_c1_c2"].values[:3, 3], [0.2, 0.0, 0.0])
-    with pytest.raises(ValueError, match="T_lr"):
-        settings_entries(Camera(fx=500.0, fy=500.0, cx=320.0, cy=240.0, width=640, height=480), "stereo", 30.0)
-
-
-def test_settings_rgbd_keys(tmp_path: Path) -> None:
-    camera = Camera(
-        fx=525.0, fy=525.0, cx=319.5, cy=239.5, width=640, height=480, distortion=(0.1, -0.2, 0.001, 0.002, 0.05), depth_scale=5000.0
-    )
-    path = write_settings(tmp_path / "rgbd.yaml", camera, "rgbd", 30.0)
-    text = path.read_text()
-    storage = read_back(path)
-    assert_types(storage, text)
-    assert storage.getNode("RGBD.DepthMapFactor").real() == 1.0  # depth goes in as float32 metres
-    assert storage.getNode("Stereo.ThDepth").real() == 40.0
-    assert storage.getNode("Stereo.b").real() == pytest.approx(0.08)  # virtual baseline, required
-    assert storage.getNode("Camera1.k3").real() == 0.05
-    assert storage.getNode("Camera2.fx").empty() and storage.getNode("Stereo.T_c1_c2").empty()
-    assert "RGBD.DepthMapFactor: 1.0\n" in settings_yaml(camera, "rgbd", 30.0)
-
-
-# -- options, states, segments, result assembly ----------------------------------------------
-def test_create_and_options() -> None:
-    system = create("orbslam3", features=2000)
-    assert isinstance(system, OrbSlam3)
-    assert system.name == "orbslam3" and system.sensors == ("mono", "stereo", "rgbd")
-    options = system.options()
-    assert options["features"] == 2000 and options["pace"] is True and options["vocabulary"] is None
-    assert system.pace_factor == 1.0
-    assert create("orbslam3", pace=2.5).pace_factor == 2.5
-    assert create("orbslam3", pace=False).pace_factor is None
-    assert options["load_retries"] == 2 and create("orbslam3", load_retries=0).load_retries == 0
-
-
-@pytest.mark.parametrize(
-    ("option", "value"),
-    [
-        ("mode", "imu"),
-        ("features", 0),
-        ("features", 2000.0),
-        ("features", True),
-        ("scale_factor", 1.0),
-        ("levels", 0),
-        ("fast_threshold", 300),
-        ("min_fast_threshold", 25),  # above fast_threshold 20
-        ("pace", -1.0),
-        ("pace", "fast"),
-        ("th_depth", 0.0),
-        ("vocabulary", "/nonexistent/voc.txt"),
-        ("settings", "/nonexistent/settings.yaml"),
-        ("keep_final", "yes"),
-        ("load_retries", -1),
-        ("load_retries", 6),
-    ],
-)
-def test_bad_option_names_option(option: str, value: object) -> None:
-    with pytest.raises(SlamSystemError, match=option):
-        create("orbslam3", **{option: value})
-
-
-def test_mode_must_fit_the_sequence() -> None:
-    sequence = open_dataset("synthetic", scene="indoor", frames=2, sensor="mono")
-    with pytest.raises(SlamSystemError, match="rgbd"):
-        create("orbslam3", mode="rgbd").run(sequence, Path("unused"))
-
-
-def test_state_mapping_and_segments() -> None:
-    raw = [NIY, NI, NI, OK, OK, RL, OK, LOST, NIY, NI, OK, OK, OK, RL, None]
-    states = map_states(raw)
-    N, K, L = TrackState.NOT_INITIALISED, TrackState.OK, TrackState.LOST
-    assert states.tolist() == [N, N, N, K, K, L, K, L, L, L, K, K, K, L, L]
-    # RECENTLY_LOST -> OK stays in the map; LOST / reset starts a new one
-    assert segment_ids(raw).tolist() == [-1, -1, -1, 0, 0, -1, 0, -1, -1, -1, 1, 1, 1, -1, -1]
-    assert segment_ids([OK, NI, OK]).tolist() == [0, -1, 1]
-    assert segment_ids([NI, NI]).tolist() == [-1, -1]
-    assert map_states([]).tolist() == []
-
-
-def test_read_final_trajectory_snaps_times(tmp_path: Path) -> None:
-    frames = np.array([1403715273.262143, 1403715273.312143, 1403715273.362143])
-    path = tmp_path / "f.txt"
-    path.write_text(
-        "1403715273262143232.000000 0.0 0.0 0.0 -0.0 -0.0 -0.0 1.0\n1403715273312143104.000000 0.1 0.2 0.3 0.0 0.0 0.7071068 0.7071068\n"
-    )
-    traj = read_final_trajectory(path, frames)
-    np.testing.assert_array_equal(traj.timestamps, frames[:2])
-    np.testing.assert_allclose(traj.positions[1], [0.1, 0.2, 0.3])
-    np.testing.assert_allclose(traj.quaternions[1], [0.0, 0.0, 0.7071068, 0.7071068], atol=1e-6)  # x y z w
-    path.write_text("")
-    with pytest.raises(ValueError, match="no poses"):
-        read_final_trajectory(path, frames)
-
-
-def test_crash_while_saving_keeps_per_frame_results(tmp_path: Path) -> None:
-    """A segfault in saving: the run is failed, but the per-frame poses written before are kept."""
-    sequence = open_dataset("synthetic", scene="indoor", frames=4, sensor="rgbd")
-    pose = np.eye(4)
-    record = {
-        "phase": "saving",
-        "raw_states": [NI, OK, OK, LOST],
-        "poses": [None, (pose + 0).ravel().tolist(), pose.ravel().tolist(), None],
-        "track_times": [0.05, 0.03, 0.03, 0.04],
-        "final_saved": False,
-    }
-    outcome = ChildOutcome(record, -11, "killed by SIGSEGV (segmentation fault)", 3.0, tmp_path / "orbslam3.log", "Saving trajectory")
-    system = create("orbslam3")
-    header = {"settings": "s.yaml", "vocabulary": "v.txt"}
-    result = system._result(sequence, "rgbd", outcome, header, tmp_path / "final.txt")
-    assert not result.ok
-    assert result.failure == (
-        "killed by SIGSEGV (segmentation fault) while saving the final trajectory; the per-frame results of all 4 frames are kept and scored"
-    )
-    assert result.info["partial"] is True and result.info["written_before_failure"] is True and result.exit_status == -11
-    assert result.tracked == 2 and result.maps == 1 and len(result.trajectory) == 2
-    assert result.final_trajectory is None
-    assert result.track_time_s == pytest.approx(0.15)
-    RunResult.from_json(result.to_json())  # JSON-ready
-
-
-@pytest.mark.parametrize(
-    "phase, frames_reported, timed_out, scored",
-    [("shutdown", 8, False, True), ("saving", 8, False, True), ("tracking", 6, False, False), ("shutdown", 8, True, False)],
-    ids=["crash-at-shutdown", "crash-while-saving", "crash-while-tracking", "timeout-at-shutdown"],
-)
-def test_a_crash_after_the_last_frame_is_scored(tmp_path: Path, phase: str, frames_reported: int, timed_out: bool, scored: bool) -> None:
-    """ORB-SLAM3 sometimes segfaults at shutdown after tracking every frame: the run keeps its
-    failure but is scored like a clean one (issue 12 point 8); a crash while tracking or a
-    timeout is not."""
-    sequence = open_dataset("synthetic", scene="indoor", frames=8, sensor="rgbd")
-    poses = [m.ravel().tolist() for m in sequence.groundtruth.matrices]
-    record = {
-        "phase": phase,
-        "raw_states": [OK] * frames_reported,
-        "poses": poses[:frames_reported],
-        "track_times": [0.03] * frames_reported,
-        "final_saved": False,
-    }
-    failure = "timed out after 5 s and was killed" if timed_out else "killed by SIGSEGV (segmentation fault)"
-    outcome = ChildOutcome(record, -11 if not timed_out else -9, failure, 3.0, tmp_path / "orbslam3.log", "", timed_out)
-    result = create("orbslam3")._result(sequence, "rgbd", outcome, {"settings": "s.yaml", "vocabulary": "v.txt"}, tmp_path / "final.txt")
-    metrics = evaluate(result, sequence.groundtruth)
-    assert result.info["written_before_failure"] is scored and metrics.failure == result.failure
-    if scored:
-        assert metrics.ate_rmse == pytest.approx(0.0, abs=1e-9) and result.failure.endswith(
-            "the per-frame results of all 8 frames are kept and scored"
-        )
-    else:
-        assert metrics.ate_rmse is None
-
-
-# -- machine load: re-pacing a run that fell behind (fake child) ------------------------------
-def _fake_child(steps_s: list[float], failure: str | None = None):
-    """A ``run_child`` stand-in whose n-th call hands frames over every ``steps_s[n]`` s (every
-    frame tracked); it records the headers it was given."""
-    headers: list[dict] = []
-
-    def run_child(entry, header, frames, workdir, timeout, log_name="run.log"):
-        step = steps_s[len(headers)]
-        headers.append(dict(header))
-        n = 30
-        log = Path(workdir) / log_name
-        log.write_text(f"attempt {len(headers)}\n")
-        record = {
-            "phase": "done",
-            "raw_states": [OK] * n,
-            "poses": [np.eye(4).ravel().tolist()] * n,
-            "track_times": [0.04] * n,
-            "given": (np.arange(n) * step).tolist(),
-            "usage": {"cpu_s": 1.0, "loop_wall_s": n * step},
-            "final_saved": False,
-        }
-        return ChildOutcome(record, 0 if failure is None else -11, failure, 3.0 + n * step, log, "")
-
-    return run_child, headers
-
-
-def _fake_run(monkeypatch: pytest.MonkeyPatch, tmp_path: Path, steps_s: list[float], failure: str | None = None, **options):
-    run_child, headers = _fake_child(steps_s, failure)
-    monkeypatch.setattr(orbslam3_module, "run_child", run_child)
-    tmp_path.mkdir(parents=True, exist_ok=True)
-    vocabulary = tmp_path / "voc.txt"
-    vocabulary.write_text("unused")
-    sequence = open_dataset("synthetic", scene="indoor", frames=30, sensor="mono")  # 30 Hz: 33 ms period
-    result = create("orbslam3", vocabulary=vocabulary, keep_final=False, **options).run(sequence, tmp_path / "run")
-    return result, headers
-
-
-def test_run_that_fell_behind_is_re_paced_and_recorded(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
-    """30 Hz frames handed over every 80 ms: fell behind; re-run just below the achieved rate
-    (0.9 x 0.42x), kept up."""
-    result, headers = _fake_run(monkeypatch, tmp_path, [0.08, 0.08])
-    assert [h["pace"] for h in headers] == [1.0, repace(1.0, 29 / 30, 29 * 0.08)] == [1.0, 0.37]
-    attempts = result.info["attempts"]
-    assert [a["fell_behind"] for a in attempts] == [True, False] and [a["pace"] for a in attempts] == [1.0, 0.37]
-    assert attempts[0]["load"]["late_frames"] == 29 and attempts[0]["tracked"] == 30
-    assert not result.fell_behind and result.load["pace"] == 0.37 and result.info["pace"] == 0.37
-    assert result.failure is None
-    assert "; fell behind the sensor clock (29 of 30 frames late by > 17 ms" in result.summary()
-    assert result.summary().endswith("re-paced at 0.37x")
-    assert (tmp_path / "run" / "orbslam3.attempt1.log").read_text() == "attempt 1\n"
-    assert RunResult.from_json(result.to_json()).info["attempts"][1]["pace"] == 0.37
-
-
-def test_run_that_keeps_falling_behind_is_marked_starved(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
-    """Slower at every attempt: after load_retries re-runs the result is kept, marked fell_behind."""
-    result, headers = _fake_run(monkeypatch, tmp_path, [0.08, 0.3, 1.0], load_retries=2)
-    assert len(headers) == 3 and headers[1]["pace"] == 0.37 and headers[2]["pace"] < headers[1]["pace"]
-    assert result.fell_behind and result.load["fell_behind"] and result.tracked == 30
-    assert [a["fell_behind"] for a in result.info["attempts"]] == [True, True, True]
-    assert "STARVED: fell behind the sensor clock" in result.summary() and "(3 attempts)" in result.summary()
-
-
-def test_run_that_fell_behind_without_retries_or_after_a_crash(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
-    result, headers = _fake_run(monkeypatch, tmp_path / "a", [0.08], load_retries=0)
-    assert len(headers) == 1 and result.fell_behind and len(result.info["attempts"]) == 1
-    assert "STARVED" in result.summary()
-    # a crashed child is not re-run; its failure says the machine could not keep up
-    result, headers = _fake_run(monkeypatch, tmp_path / "b", [0.08], failure="killed by SIGSEGV (segmentation fault)")
-    assert len(headers) == 1 and result.fell_behind
-    assert "; the machine could not keep up: the run fell behind the sensor clock (29 of 30 frames late" in result.failure
-    # unpaced: never re-run
-    result, headers = _fake_run(monkeypatch, tmp_path / "c", [0.08], pace=False)
-    assert len(headers) == 1 and not result.fell_behind and not result.load["paced"]
-
-
 # -- real ORB-SLAM3 runs ---------------------------------------------------------------------
 @pytest.fixture(scope="module")
-def urban_stereo(vocabulary: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[RunResult, object]:
+def urban_stereo(vocabulary: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[RunResult, Sequence]:
     sequence = open_dataset("synthetic", scene="urban", frames=100, sensor="stereo")
     _prerender(sequence)
     return _run(vocabulary, sequence, tmp_path_factory.mktemp("orb-urban")), sequence
 
 
 @pytest.fixture(scope="module")
-def indoor_rgbd(vocabulary: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[RunResult, object]:
+def indoor_rgbd(vocabulary: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[RunResult, Sequence]:
     sequence = open_dataset("synthetic", scene="indoor", frames=100, sensor="rgbd")
     _prerender(sequence)
     return _run(vocabulary, sequence, tmp_path_factory.mktemp("orb-indoor")), sequence
 
 
 @pytest.fixture(scope="module")
-def kitti_mono(vocabulary: Path, shared_data: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[RunResult, object]:
+def kitti_mono(vocabulary: Path, shared_data: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[RunResult, Sequence]:
     sequence = open_dataset("kitti", shared_data / "kitti" / "sequences" / "07")
     assert len(sequence) == 140
     return _run(vocabulary, sequence, tmp_path_factory.mktemp("orb-kitti"), features=2000, pace=True), sequence
 
 
 @pytest.fixture(scope="module")
-def euroc_stereo(vocabulary: Path, shared_data: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[RunResult, object]:
+def euroc_stereo(vocabulary: Path, shared_data: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[RunResult, Sequence]:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         sequence = open_dataset("euroc", shared_data / "euroc" / "V1_01_easy_micro", stereo=True)
@@ -464,9 +131,9 @@ def _report(result: RunResult, error: float | None = None) -> str:
     return text + (f"; ATE {error:.4f} m" if error is not None else "")
 
 
-def test_orbslam3_real_stereo_synthetic_urban(urban_stereo: tuple[RunResult, object]) -> None:
+def test_orbslam3_real_stereo_synthetic_urban(urban_stereo: tuple[RunResult, Sequence]) -> None:
     result, sequence = urban_stereo
-    assert result.ok, result.failure + "\n" + result.log_tail
+    assert result.ok, why(result)
     assert result.sensor == "stereo" and result.frames == 100 and result.exit_status == 0
     assert result.tracking_rate > 0.95, _report(result)
     error, matched = ate(result.trajectory, sequence.groundtruth, sim3=False)
@@ -474,7 +141,7 @@ def test_orbslam3_real_stereo_synthetic_urban(urban_stereo: tuple[RunResult, obj
     assert error < URBAN_ATE_BOUND_M, _report(result, error)  # measured 0.016-0.059 m over a 98 m path
 
 
-def test_orbslam3_real_stereo_synthetic_urban_result_fields(urban_stereo: tuple[RunResult, object]) -> None:
+def test_orbslam3_real_stereo_synthetic_urban_result_fields(urban_stereo: tuple[RunResult, Sequence]) -> None:
     result, sequence = urban_stereo
     assert result.scored == "online" and result.maps == 1
     np.testing.assert_array_equal(result.timestamps, sequence.timestamps)
@@ -487,27 +154,28 @@ def test_orbslam3_real_stereo_synthetic_urban_result_fields(urban_stereo: tuple[
     assert info["features"] == 2000 and info["phase"] == "done"
     assert info["attempts"][0]["pace"] == 1.0 and info["pace"] == info["attempts"][-1]["pace"]  # re-paced when the machine was busy
     assert info["load_time_s"] > 0 and info["track_ms_mean"] > 0
-    assert result.log_path.is_file() and "Vocabulary loaded" in result.log_path.read_text()
+    assert "Vocabulary loaded" in log_text(result)
     RunResult.from_json(result.to_json())
 
 
 def test_orbslam3_real_stereo_wrong_baseline_breaks_the_bound(
-    urban_stereo: tuple[RunResult, object], vocabulary: Path, tmp_path: Path
+    urban_stereo: tuple[RunResult, Sequence], vocabulary: Path, tmp_path: Path
 ) -> None:
     """The urban bound can fail: settings with a 2 % too long baseline scale the map by 2 %."""
     _, sequence = urban_stereo
+    assert sequence.camera.T_lr is not None
     T_left_right = sequence.camera.T_lr.copy()
     T_left_right[:3, 3] *= 1.02
     settings = write_settings(tmp_path / "wrong_baseline.yaml", sequence.camera.with_stereo(T_left_right), "stereo", 10.0)
     result = _run(vocabulary, sequence, tmp_path, settings=settings)
-    assert result.ok, result.failure + "\n" + result.log_tail
+    assert result.ok, why(result)
     error, _ = ate(result.trajectory, sequence.groundtruth, sim3=False)
     assert error > 2 * URBAN_ATE_BOUND_M, _report(result, error)  # measured 0.55 m
 
 
-def test_orbslam3_real_rgbd_synthetic_indoor(indoor_rgbd: tuple[RunResult, object]) -> None:
+def test_orbslam3_real_rgbd_synthetic_indoor(indoor_rgbd: tuple[RunResult, Sequence]) -> None:
     result, sequence = indoor_rgbd
-    assert result.ok, result.failure + "\n" + result.log_tail
+    assert result.ok, why(result)
     assert result.sensor == "rgbd" and result.maps == 1
     assert result.tracking_rate > 0.95, _report(result)
     error, _ = ate(result.trajectory, sequence.groundtruth, sim3=False)
@@ -516,19 +184,19 @@ def test_orbslam3_real_rgbd_synthetic_indoor(indoor_rgbd: tuple[RunResult, objec
     assert ate(result.final_trajectory, sequence.groundtruth, sim3=False)[0] < 0.05  # measured 0.005 m
 
 
-def test_orbslam3_real_mono_kitti07(kitti_mono: tuple[RunResult, object]) -> None:
+def test_orbslam3_real_mono_kitti07(kitti_mono: tuple[RunResult, Sequence]) -> None:
     result, sequence = kitti_mono
-    assert result.ok, result.failure + "\n" + result.log_tail
+    assert result.ok, why(result)
     assert result.sensor == "mono"
     assert result.tracked >= 130, _report(result)  # measured 136/140, first OK frame 4
-    assert result.first_tracked <= 10
+    assert result.first_tracked is not None and result.first_tracked <= 10
     error, matched = ate(result.trajectory, sequence.groundtruth, sim3=True)
-    assert matched == len(result.trajectory)
+    assert result.trajectory is not None and matched == len(result.trajectory)
     assert error <= 0.40, _report(result, error)  # measured 0.24-0.27 m over 78 m
     assert result.wall_time_s >= 13.0  # paced at ~9.6 Hz: 139 frame periods = 14.4 s
 
 
-def test_orbslam3_real_mono_kitti07_load_figures(kitti_mono: tuple[RunResult, object]) -> None:
+def test_orbslam3_real_mono_kitti07_load_figures(kitti_mono: tuple[RunResult, Sequence]) -> None:
     """Every real run says whether it kept up with the sensor clock; a re-paced one says so."""
     result, _ = kitti_mono
     load, attempts = result.load, result.info["attempts"]
@@ -550,6 +218,7 @@ def test_orbslam3_real_starved_run_is_re_paced(vocabulary: Path, shared_data: Pa
     same time per frame, which the sensor clock now allows."""
     sequence = open_dataset("kitti", shared_data / "kitti" / "sequences" / "07", max_frames=60)
     system = create("orbslam3", vocabulary=vocabulary, load_retries=2)
+    assert isinstance(system, OrbSlam3)
     system._stall_s = 0.15
     result = system.run(sequence, tmp_path, timeout=300)
     attempts = result.info["attempts"]
@@ -567,7 +236,7 @@ def test_orbslam3_real_starved_run_is_re_paced(vocabulary: Path, shared_data: Pa
     assert ("STARVED" in summary) if result.fell_behind else summary.endswith(f"re-paced at {result.load['pace']:g}x"), summary
 
 
-def test_orbslam3_real_mono_kitti07_final_trajectory(kitti_mono: tuple[RunResult, object]) -> None:
+def test_orbslam3_real_mono_kitti07_final_trajectory(kitti_mono: tuple[RunResult, Sequence]) -> None:
     result, sequence = kitti_mono
     final = result.final_trajectory
     assert final is not None and len(final) >= 130
@@ -580,11 +249,11 @@ def test_orbslam3_real_mono_kitti07_final_trajectory(kitti_mono: tuple[RunResult
     assert np.all(result.states[:first] == TrackState.NOT_INITIALISED)
 
 
-def test_orbslam3_real_stereo_euroc_unrectified(euroc_stereo: tuple[RunResult, object]) -> None:
+def test_orbslam3_real_stereo_euroc_unrectified(euroc_stereo: tuple[RunResult, Sequence]) -> None:
     result, sequence = euroc_stereo
-    assert result.ok, result.failure + "\n" + result.log_tail
+    assert result.ok, why(result)
     assert result.frames == 95 and result.tracked == 95, _report(result)
-    assert "Stereo baseline: 0.110078" in result.log_path.read_text()  # ORB-SLAM3 rectified the pair
+    assert "Stereo baseline: 0.110078" in log_text(result)  # ORB-SLAM3 rectified the pair
     error, matched = ate(result.trajectory, sequence.groundtruth, sim3=False)
     assert matched >= 70  # ground truth covers frames 21-94
     assert error < 0.005, _report(result, error)  # measured 0.7 mm: the camera stands still
@@ -612,7 +281,7 @@ def test_orbslam3_real_bad_settings_exit_255(vocabulary: Path, tmp_path: Path) -
     settings.write_text(text)
     result = _run(vocabulary, sequence, tmp_path / "run", settings=settings)
     assert not result.ok and result.exit_status == 255
-    assert "exit status 255" in result.failure and "while loading" in result.failure
+    assert result.failure is not None and "exit status 255" in result.failure and "while loading" in result.failure
     assert "Camera1.fx parameter must be a real number" in result.log_tail
     assert result.tracked == 0 and result.trajectory is None and not result.info["settings_generated"]
     assert result.frames == 3 and np.all(result.states == TrackState.NOT_INITIALISED)
@@ -637,7 +306,7 @@ def test_orbslam3_real_timeout_keeps_partial_results(vocabulary: Path, shared_da
         warnings.simplefilter("ignore")
         sequence = open_dataset("euroc", shared_data / "euroc" / "V1_01_easy_micro", stereo=True)
     result = _run(vocabulary, sequence, tmp_path, timeout=6.0, pace=0.5)  # 95 frames at 10 Hz: 9.4 s
-    assert not result.ok and "timed out after 6 s" in result.failure, result.failure
+    assert result.failure is not None and "timed out after 6 s" in result.failure, result.failure
     assert result.exit_status == -9
     assert "while tracking" in result.failure
     reported = result.info["frames_reported"]
@@ -646,7 +315,7 @@ def test_orbslam3_real_timeout_keeps_partial_results(vocabulary: Path, shared_da
     assert np.all(result.states[reported:] == TrackState.LOST)  # never reported after tracking
 
 
-def test_orbslam3_real_results_record_track_time(euroc_stereo: tuple[RunResult, object]) -> None:
+def test_orbslam3_real_results_record_track_time(euroc_stereo: tuple[RunResult, Sequence]) -> None:
     result, _ = euroc_stereo
-    assert 5.0 < ms_per_frame(result) < 500.0  # measured 46-79 ms/frame
-    assert result.track_time_s < result.wall_time_s
+    assert ms_per_frame(result) > 0  # measured 46-79 ms/frame; benchmarks/bench_systems.py times it
+    assert result.track_time_s is not None and result.track_time_s < result.wall_time_s

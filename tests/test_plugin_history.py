@@ -6,11 +6,15 @@ boundary regressed and no other, and ``sal history`` lists the tests."""
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
 
 import pytest
 from plugin_suites import (
     MODES,
     calls,
+    check_all,
     check_bracket,
     has_line,
     outcomes,
@@ -47,45 +51,134 @@ def runs_saved(pytester: pytest.Pytester) -> list[str]:
     return sorted(p.name for p in folder.glob("*.json")) if folder.is_dir() else []
 
 
-@pytest.mark.parametrize("mode", MODES)
-def test_history_warm_start_and_compare_fail(pytester: pytest.Pytester, mode: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+@dataclass
+class HistorySessions:
+    """Five inner sessions on one history folder and what each left: run 1 cold, run 2 warm
+    (``--sal-save=main``), run 3 with one fake worse, one better (``--sal-compare``), the same
+    commit against main and against 'last'; then ``sal history`` on the folder."""
+
+    first: pytest.RunResult
+    cold: dict[str, Any]
+    saved_after_first: list[str]
+    first_run_file: dict[str, Any]
+    second: pytest.RunResult
+    second_slam_runs: int
+    warm: dict[str, Any]
+    saved_after_second: list[str]
+    third: pytest.RunResult
+    compared: dict[str, Any]
+    saved_after_third: list[str]
+    again: list[tuple[pytest.RunResult, dict[str, Any]]]
+    saved_after_again: list[str]
+    listing: tuple[int, str]
+    trend: tuple[int, str]
+    plot: Path
+
+
+def run_sessions(pytester: pytest.Pytester, mode: list[str], capsys: pytest.CaptureFixture[str]) -> HistorySessions:
     project(pytester, HISTORY_TESTS, {name: "min(1, v / 40)" for name in NAMES})
-
-    # run 1: cold searches; one run file (written by the controller only under xdist)
-    first = run(pytester, mode, "--junitxml=first.xml")
-    first.assert_outcomes(passed=3)
-    assert len(runs_saved(pytester)) == 1
-    cold = outcomes(pytester.path / "first.xml")
-    for outcome in cold.values():
-        check_bracket(outcome, predicted(), tolerance=1)  # from 19 m on
-        assert len(outcome["trials"]) > 3
-    saved = json.loads((pytester.path / "history" / runs_saved(pytester)[0]).read_text())
-    assert sorted(o["test_id"] for o in saved["outcomes"]) == sorted(f"test_suite.py::{n}" for n in NAMES)
-
-    # run 2, SLAM runs again (no cache): the previous boundary still brackets -> 3 trials each
+    first = run(pytester, mode, "--junitxml=first.xml")  # one run file, written by the controller only under xdist
+    saved_after_first = runs_saved(pytester)
+    first_run_file = json.loads((pytester.path / "history" / saved_after_first[0]).read_text()) if saved_after_first else {}
     before = calls(pytester)
-    second = run(pytester, mode, "--sal-no-cache", "--junitxml=second.xml", "--sal-save=main")
-    second.assert_outcomes(passed=3)
-    assert calls(pytester) - before == 3 * 3
-    warm = outcomes(pytester.path / "second.xml")
-    for name, outcome in warm.items():
-        assert [t["value"] for t in outcome["trials"]] == [30, cold[name]["boundary"]["pass_value"], cold[name]["boundary"]["fail_value"]]
-        assert outcome["boundary"] == cold[name]["boundary"] and outcome["termination"] == "tolerance"
-        assert not any(t["cached"] for t in outcome["trials"])
-    assert len(runs_saved(pytester)) == 2 and runs_saved(pytester)[1].endswith("_main.json")
-
-    # run 3 (bare --sal-compare: against the baseline named main): one fake got worse (boundary 23.75 m), one better (14.25 m), one is unchanged
+    second = run(pytester, mode, "--sal-no-cache", "--junitxml=second.xml", "--sal-save=main")  # SLAM runs again
+    second_slam_runs = calls(pytester) - before
+    saved_after_second = runs_saved(pytester)
+    # one fake gets worse (boundary 23.75 m), one better (14.25 m), one is unchanged
     write_tracked(pytester, {"test_worse": "min(1, v / 50)", "test_better": "min(1, v / 30)", "test_same": "min(1, v / 40)"})
     third = run(pytester, mode, "-v", "--sal-compare", "--sal-compare-fail=boundary:10%", "--junitxml=third.xml")
-    third.assert_outcomes(passed=2, failed=1)
-    has_line(third, "test_worse", "FAILED")
-    before_pass = warm["test_worse"]["boundary"]["pass_value"]
-    compared = outcomes(pytester.path / "third.xml")
-    now_pass = compared["test_worse"]["boundary"]["pass_value"]
-    check_bracket(compared["test_worse"], predicted(share=lambda v: v / 50), tolerance=1)
-    check_bracket(compared["test_better"], predicted(share=lambda v: v / 30), tolerance=1)
+    saved_after_third = runs_saved(pytester)
+    again = []
+    for ref in ("", "=last"):
+        result = run(pytester, mode, f"--sal-compare{ref}", "--sal-compare-fail=boundary:10%", "--sal-save=main", "--junitxml=again.xml")
+        again.append((result, outcomes(pytester.path / "again.xml")))
+    saved_after_again = runs_saved(pytester)
+    capsys.readouterr()
+    listing = cli.main(["history", "--history-dir", str(pytester.path / "history")]), capsys.readouterr().out
+    plot = pytester.path / "worse.png"
+    trend = cli.main(["history", "test_worse", "--history-dir", str(pytester.path / "history"), "-o", str(plot)]), capsys.readouterr().out
+    return HistorySessions(
+        first,
+        outcomes(pytester.path / "first.xml"),
+        saved_after_first,
+        first_run_file,
+        second,
+        second_slam_runs,
+        outcomes(pytester.path / "second.xml"),
+        saved_after_second,
+        third,
+        outcomes(pytester.path / "third.xml"),
+        saved_after_third,
+        again,
+        saved_after_again,
+        listing,
+        trend,
+        plot,
+    )
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_history_warm_start_and_compare_fail(pytester: pytest.Pytester, mode: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+    sessions = run_sessions(pytester, mode, capsys)
+    check_all(
+        {
+            "run 1: cold searches, one run file": lambda: check_cold_run(sessions),
+            "run 2: the previous boundary still brackets, 3 trials each": lambda: check_warm_run(sessions),
+            "run 3: --sal-compare-fail fails the regressed test only": lambda: check_compared_run(sessions),
+            "run 3: the failure says what regressed": lambda: check_regression_message(sessions),
+            "runs 4-5: the regressed commit cannot pass the gate, nor take the name main": lambda: check_reruns(sessions),
+            "sal history lists every test and plots one": lambda: check_history_command(sessions),
+        }
+    )
+
+
+def check_cold_run(sessions: HistorySessions) -> None:
+    sessions.first.assert_outcomes(passed=3)
+    assert len(sessions.saved_after_first) == 1
+    for outcome in sessions.cold.values():
+        check_bracket(outcome, predicted(), tolerance=1)  # from 19 m on
+        assert len(outcome["trials"]) > 3
+    assert sorted(o["test_id"] for o in sessions.first_run_file["outcomes"]) == sorted(f"test_suite.py::{n}" for n in NAMES)
+
+
+def check_warm_run(sessions: HistorySessions) -> None:
+    sessions.second.assert_outcomes(passed=3)
+    assert sessions.second_slam_runs == 3 * 3
+    for name, outcome in sessions.warm.items():
+        cold = sessions.cold[name]["boundary"]
+        assert [t["value"] for t in outcome["trials"]] == [30, cold["pass_value"], cold["fail_value"]]
+        assert outcome["boundary"] == cold and outcome["termination"] == "tolerance"
+        assert not any(t["cached"] for t in outcome["trials"])
+    assert len(sessions.saved_after_second) == 2 and sessions.saved_after_second[1].endswith("_main.json")
+
+
+def check_compared_run(sessions: HistorySessions) -> None:
+    """Bare --sal-compare compares with the baseline named main: worse fails, better and same pass."""
+    sessions.third.assert_outcomes(passed=2, failed=1)
+    has_line(sessions.third, "test_worse", "FAILED")
+    check_bracket(sessions.compared["test_worse"], predicted(share=lambda v: v / 50), tolerance=1)
+    check_bracket(sessions.compared["test_better"], predicted(share=lambda v: v / 30), tolerance=1)
+    assert sessions.compared["test_worse"]["verdict"] == "passed" and sessions.compared["test_worse"]["regression"]
+    assert sessions.compared["test_worse"]["previous"] == sessions.warm["test_worse"]["boundary"]
+    for name in ("test_better", "test_same"):  # an improvement, and no change, do not fail
+        assert sessions.compared[name]["regression"] is None and sessions.compared[name]["previous"] == sessions.warm[name]["boundary"]
+        has_line(sessions.third, name, "PASSED (fog.visibility_m boundary")
+    assert sessions.compared["test_better"]["boundary"]["pass_value"] < 15
+    assert (
+        sessions.compared["test_same"]["boundary"] == sessions.warm["test_same"]["boundary"]
+        and len(sessions.compared["test_same"]["trials"]) == 3
+    )
+    has_line(sessions.third, "test_worse ", "REGRESSED", "FAILED")  # the summary table
+    for name in NAMES:
+        assert sessions.compared[name]["comparison"].startswith("main (run 0002"), sessions.compared[name]["comparison"]
+    assert len(sessions.saved_after_third) == 3
+
+
+def check_regression_message(sessions: HistorySessions) -> None:
+    before_pass = sessions.warm["test_worse"]["boundary"]["pass_value"]
+    now_pass = sessions.compared["test_worse"]["boundary"]["pass_value"]
     assert now_pass > 23.75 > 1.1 * before_pass
-    third.stdout.fnmatch_lines(
+    sessions.third.stdout.fnmatch_lines(
         [
             "*test_worse*",
             "regressed against the history (the requirement is met): tracking_rate >= 0.5 wherever fog.visibility_m >= 30 m",
@@ -96,38 +189,24 @@ def test_history_warm_start_and_compare_fail(pytester: pytest.Pytester, mode: li
             ),
         ]
     )
-    assert compared["test_worse"]["verdict"] == "passed" and compared["test_worse"]["regression"]
-    assert compared["test_worse"]["previous"] == warm["test_worse"]["boundary"]
-    for name in ("test_better", "test_same"):  # an improvement, and no change, do not fail
-        assert compared[name]["regression"] is None and compared[name]["previous"] == warm[name]["boundary"]
-        has_line(third, name, "PASSED (fog.visibility_m boundary")
-    assert compared["test_better"]["boundary"]["pass_value"] < 15
-    assert compared["test_same"]["boundary"] == warm["test_same"]["boundary"] and len(compared["test_same"]["trials"]) == 3
-    has_line(third, "test_worse ", "REGRESSED", "FAILED")  # the summary table
-    for name in NAMES:
-        assert compared[name]["comparison"].startswith("main (run 0002"), compared[name]["comparison"]
-    assert len(runs_saved(pytester)) == 3
 
-    # the same regressed commit again, against main and against 'last': the regressed run 3 is
-    # not a baseline, so retrying cannot pass the gate; and it cannot take the name main
-    for ref in ("", "=last"):
-        again = run(pytester, mode, f"--sal-compare{ref}", "--sal-compare-fail=boundary:10%", "--sal-save=main", "--junitxml=again.xml")
-        again.assert_outcomes(passed=2, failed=1)
-        assert outcomes(pytester.path / "again.xml")["test_worse"]["previous"] == warm["test_worse"]["boundary"]
-        again.stdout.fnmatch_lines(["pytest-sal: this run is saved without the name 'main': 1 test(s) failed the --sal-compare gate*"])
-    assert len(runs_saved(pytester)) == 5 and not any(p.endswith("_main.json") for p in runs_saved(pytester)[2:])
 
-    # `sal history` lists every test of the folder
-    capsys.readouterr()
-    assert cli.main(["history", "--history-dir", str(pytester.path / "history")]) == 0
-    listing = capsys.readouterr().out
-    assert "5 runs, 0001" in listing and "0005" in listing
+def check_reruns(sessions: HistorySessions) -> None:
+    """The regressed run 3 is not a baseline, so retrying cannot pass the gate; and it cannot take the name main."""
+    for result, found in sessions.again:
+        result.assert_outcomes(passed=2, failed=1)
+        assert found["test_worse"]["previous"] == sessions.warm["test_worse"]["boundary"]
+        result.stdout.fnmatch_lines(["pytest-sal: this run is saved without the name 'main': 1 test(s) failed the --sal-compare gate*"])
+    assert len(sessions.saved_after_again) == 5 and not any(p.endswith("_main.json") for p in sessions.saved_after_again[2:])
+
+
+def check_history_command(sessions: HistorySessions) -> None:
+    status, listing = sessions.listing
+    assert status == 0 and "5 runs, 0001" in listing and "0005" in listing
     for name in NAMES:
         assert f"test_suite.py::{name}" in listing
-    plot = pytester.path / "worse.png"
-    assert cli.main(["history", "test_worse", "--history-dir", str(pytester.path / "history"), "-o", str(plot)]) == 0
-    trend = capsys.readouterr().out
-    assert "test_suite.py::test_worse" in trend and plot.is_file()
+    status, trend = sessions.trend
+    assert status == 0 and "test_suite.py::test_worse" in trend and sessions.plot.is_file()
     assert sum(line.startswith(("0001", "0002", "0003", "0004", "0005")) for line in trend.splitlines()) == 5, trend
     run_3 = next(line for line in trend.splitlines() if line.startswith("0003"))
     assert "failed (regressed)" in run_3, run_3  # as pytest reported it

@@ -2,7 +2,7 @@
 pytest sessions (``pytester``) on ``FakeSlam``, whose boundaries are exactly predictable, once
 without xdist and once with ``-n 2``: verdicts and boundaries, failure messages, flakiness, the
 trial cache, sweeps, the ``sal`` mark, parametrised systems, JUnit XML, Markdown and HTML
-reports, and one real ORB-SLAM3 search.
+reports (the real ORB-SLAM3 search through the plugin is in test_plugin_orbslam3.py).
 
 On the default 60-frame urban world ``FakeSlam(tracked="min(1, v / 40)")`` meets
 ``tracking_rate >= 0.5`` exactly from 20 m on; on the 20-frame world most suites here use
@@ -13,8 +13,6 @@ helpers in ``plugin_suites.py``.
 
 from __future__ import annotations
 
-import importlib.util
-import math
 import re
 from pathlib import Path
 
@@ -24,6 +22,7 @@ from plugin_suites import (
     MODES,
     SMALL_DATASET,
     calls,
+    check_all,
     check_bracket,
     has_line,
     junit,
@@ -67,13 +66,25 @@ def test_fails_everywhere(sal_outcome):
 
 @pytest.mark.parametrize("mode", MODES)
 def test_verdicts_boundaries_summary_junit_and_reports(pytester: pytest.Pytester, mode: list[str]) -> None:
-    # the default dataset (60 frames): the documented 19.38-20 m bracket
+    # the default dataset (60 frames): the documented 19.38-20 m bracket; each check reads the one session
     project(pytester, VERDICT_TESTS, {"test_passes_everywhere": "1", "test_fails_everywhere": "0"}, small=False)
     result = run(pytester, mode, "-v", "--junitxml=out.xml", "--sal-report-md=summary.md", "--sal-report-html=html")
     result.assert_outcomes(passed=2, failed=2)
     assert "BODY-RAN" not in output(result)
+    found = outcomes(pytester.path / "out.xml")
+    check_all(
+        {
+            "1. pass: verbose status and the summary table": lambda: check_passed_lines(result),
+            "2. fail: the requirement, the bracket with its metrics, the reproduction": lambda: check_failure_message(result, found),
+            "3. not bracketed either way": lambda: check_not_bracketed(result, found),
+            "11. JUnit properties": lambda: check_junit_properties(pytester.path / "out.xml", found),
+            "12. the Markdown summary and the HTML report": lambda: check_reports(pytester.path, found),
+            "13. the summary ends naming each file written, as given or from the cwd": lambda: check_files_named(result, pytester.path),
+        }
+    )
 
-    # 1. pass: verbose status and the summary table
+
+def check_passed_lines(result: pytest.RunResult) -> None:
     has_line(result, "test_pass", "PASSED (fog.visibility_m boundary 19.38-20 m)")
     has_line(result, "test_passes_everywhere", "PASSED (fog.visibility_m boundary beyond 1 m (passed everywhere searched))")
     result.stdout.fnmatch_lines(
@@ -85,12 +96,10 @@ def test_verdicts_boundaries_summary_junit_and_reports(pytester: pytest.Pytester
     has_line(result, "test_pass ", "fake", "fog.visibility_m", ">= 25 m", "19.38-20 m", " 8 ", "+5 m", "passed")
     has_line(result, "test_fail ", "fake", "fog.visibility_m", ">= 25 m", "FAILED")
 
-    # 2. fail: the message names the requirement, the bracket with its metrics, the reproduction
-    text = output(result)
-    verdict = predicted(n=60, threshold=0.8)
-    found = outcomes(pytester.path / "out.xml")
+
+def check_failure_message(result: pytest.RunResult, found: dict[str, dict]) -> None:
     failed = found["test_fail"]
-    check_bracket(failed, verdict)
+    check_bracket(failed, predicted(n=60, threshold=0.8))
     assert failed["verdict"] == "failed" and failed["termination"] == "max_trials" and len(failed["trials"]) == 8
     pass_end, fail_end = failed["boundary"]["pass_value"], failed["boundary"]["fail_value"]
     assert fail_end < 95 / 3 <= pass_end  # round(60 v / 40) >= 48 from v = 31.67 m on
@@ -105,30 +114,30 @@ def test_verdicts_boundaries_summary_junit_and_reports(pytester: pytest.Pytester
         ]
     )
 
-    # 3. not bracketed either way
+
+def check_not_bracketed(result: pytest.RunResult, found: dict[str, dict]) -> None:
     assert found["test_passes_everywhere"]["termination"] == "not_bracketed"
     everywhere = found["test_fails_everywhere"]
     assert everywhere["verdict"] == "failed" and everywhere["termination"] == "not_bracketed"
     assert [t["value"] for t in everywhere["trials"]] == [25, 100000]
     assert everywhere["boundary"]["pass_value"] is None
-    assert "failed everywhere searched) (2 trials, 2 runs, not_bracketed)" in text
+    assert "failed everywhere searched) (2 trials, 2 runs, not_bracketed)" in output(result)
 
-    # 11. JUnit properties of every robustness test
-    props = junit(pytester.path / "out.xml")
-    assert {k: props["test_pass"][k] for k in ("sal_boundary_pass", "sal_boundary_fail", "sal_trials")} == {
-        "sal_boundary_pass": "20",
-        "sal_boundary_fail": "19.375",
-        "sal_trials": "8",
-    }
+
+def check_junit_properties(path: Path, found: dict[str, dict]) -> None:
+    props = junit(path)
+    assert [props["test_pass"][k] for k in ("sal_boundary_pass", "sal_boundary_fail", "sal_trials")] == ["20", "19.375", "8"]
+    pass_end = found["test_fail"]["boundary"]["pass_value"]
     assert props["test_fail"]["sal_boundary_pass"] == f"{pass_end:g}" and props["test_fail"]["sal_trials"] == "8"
     assert props["test_passes_everywhere"]["sal_boundary_fail"] == "" and props["test_passes_everywhere"]["sal_trials"] == "2"
     assert props["test_fails_everywhere"]["sal_boundary_pass"] == "" and props["test_fails_everywhere"]["sal_boundary_fail"] == "100000"
 
-    # 12. the Markdown summary and the HTML report with its images
-    markdown = (pytester.path / "summary.md").read_text()
+
+def check_reports(folder: Path, found: dict[str, dict]) -> None:
+    markdown = (folder / "summary.md").read_text()
     assert "4 robustness requirements: 2 passed, 2 failed" in markdown
     assert all(name in markdown for name in found) and "19.38-20 m" in markdown
-    index = pytester.path / "html" / "index.html"
+    index = folder / "html" / "index.html"
     page = index.read_text()
     assert all(name in page for name in found)
     images = [src for src in re.findall(r"src='([^']+)'", page) if src.endswith(".png")]
@@ -137,8 +146,9 @@ def test_verdicts_boundaries_summary_junit_and_reports(pytester: pytest.Pytester
         image = index.parent / src
         assert image.is_file() and image.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", src
 
-    # 13. the summary ends naming each file written, as given on the command line or from the cwd
-    (history,) = (pytester.path / "history").glob("*.json")
+
+def check_files_named(result: pytest.RunResult, folder: Path) -> None:
+    (history,) = (folder / "history").glob("*.json")
     result.stdout.fnmatch_lines(
         [
             "*pytest-sal robustness boundaries*",
@@ -238,8 +248,6 @@ def test_second_run_reads_every_trial_from_the_cache(pytester: pytest.Pytester, 
         assert [(t["value"], t["passed"], t["metrics"]) for t in outcome["trials"]] == [
             (t["value"], t["passed"], t["metrics"]) for t in cold[name]["trials"]
         ]
-    spent = {name: [sum(t["wall_time_s"] for t in o["trials"]) for o in (cold[name], warm[name])] for name in cold}
-    assert all(warm_s < cold_s for cold_s, warm_s in spent.values()), spent
     n_meets = len(cold["test_meets"]["trials"])
     has_line(second, "test_meets", f"{n_meets} ({n_meets} cached)")
 
@@ -357,42 +365,3 @@ def test_fog(sal_outcome):
             f"PASSED (fog.visibility_m boundary {outcome['boundary']['fail_value']:.4g}-{outcome['boundary']['pass_value']:.4g} m)",
         )
         has_line(result, f"{name} ", "fake", "passed")
-
-
-# -- 14: a real ORB-SLAM3 run through the plugin ---------------------------------------------
-ORB_CONFTEST = """
-import os
-
-import pytest
-from sal_wrappers import create
-
-
-@pytest.fixture
-def sal_system():
-    return create("orbslam3", vocabulary=os.environ["SAL_ORB_VOCABULARY"])
-"""
-
-
-@pytest.mark.skipif(importlib.util.find_spec("pyorbslam3") is None, reason="pyorbslam3 is not installed")
-def test_orbslam3_through_the_plugin(pytester: pytest.Pytester, monkeypatch: pytest.MonkeyPatch, orb_vocabulary: Path) -> None:
-    monkeypatch.setenv("SAL_ORB_VOCABULARY", str(orb_vocabulary))
-    pytester.makeconftest(ORB_CONFTEST)
-    pytester.makepyfile(
-        test_orb=HEADER
-        + """
-
-@sal.require(tracking_rate >= 0.5, fog.visibility_m >= 200, max_trials=2)
-def test_mild_fog(sal_outcome):
-    assert sal_outcome.system == "orbslam3" and sal_outcome.verdict == "passed"
-    edge = sal_outcome.trials[0]
-    assert edge.value == 200 and edge.passed and not edge.cached
-    assert edge.runs[0]["tracking_rate"] > 0.5
-    assert len(sal_outcome.trials) == 2
-"""
-    )
-    result = run(pytester, [], "-v", "--junitxml=out.xml")
-    result.assert_outcomes(passed=1)
-    found = outcomes(pytester.path / "out.xml")["test_mild_fog"]
-    assert found["system"] == "orbslam3" and found["system_options"]["vocabulary"] == str(orb_vocabulary)
-    has_line(result, "test_mild_fog", "PASSED (fog.visibility_m boundary")
-    assert math.isfinite(found["trials"][0]["metrics"]["tracking_rate"])

@@ -9,159 +9,14 @@ import cv2
 import numpy as np
 import pytest
 from browser import find_picture, needs_chromium, screenshot
+from report_outcomes import FOG_REQ, XSS_ID, flaky, fog, m, never_passed, rain, regressed, sweep_point
 
-from pytest_sal.engine.outcome import Boundary, Outcome, Trial, TrialMetrics
+from pytest_sal.engine.outcome import Boundary, Outcome, Trial
 from pytest_sal.report.formatting import short_id
 from pytest_sal.report.html_page import esc
 from pytest_sal.report.metric_plot import metric_figure, metric_plot
 from pytest_sal.report.outcome_page import write_html_report
 from pytest_sal.report.outcome_report import headline, markdown_report, summary_rows, terminal_table, write_markdown
-
-FOG_REQ = "ate_rmse < 1.5 m and tracking_rate >= 0.9 wherever fog.visibility_m >= 25 m"
-XSS_ID = "tests/robustness/test_weather.py::test_rain[<script>alert(1)</script>]"
-
-
-def m(ate: float | None, rate: float | None) -> TrialMetrics:
-    return TrialMetrics({"ate_rmse": ate, "tracking_rate": rate, "rpe_trans": None, "rpe_rot": None, "scale_error": None})
-
-
-def fog(artifacts_dir: Path | None = None) -> Outcome:
-    """Passed: edge 25 m passes, geometric bisection towards 1 m, boundary 13.7-15.1 m, all cached."""
-    trials = [
-        Trial(25.0, True, m(0.21, 0.99), cached=True, wall_time_s=0.01),
-        Trial(5.0, False, m(4.8, 0.41), cached=True, failed=["ate_rmse < 1.5 m", "tracking_rate >= 0.9"]),
-        Trial(11.18, False, m(2.1, 0.84), cached=True, failed=["ate_rmse < 1.5 m", "tracking_rate >= 0.9"]),
-        Trial(16.72, True, m(0.44, 0.97), cached=True),
-        Trial(13.67, False, m(1.7, 0.93), cached=True, failed=["ate_rmse < 1.5 m"]),
-        Trial(15.12, True, m(0.83, 0.95), cached=True),
-    ]
-    if artifacts_dir is not None:
-        for i, t in enumerate(trials):
-            t.artifacts["frame"] = str(png(artifacts_dir / f"frame{i}.png", (64, 96), 40 * i))
-        trials[0].artifacts["trajectory"] = str(png(artifacts_dir / "traj0.png", (60, 80), 200))
-    return Outcome(
-        test_id="tests/robustness/test_weather.py::test_fog[orbslam3-euroc_mh01]",
-        system="orbslam3",
-        dataset="euroc/MH_01",
-        parameter="fog.visibility_m",
-        worse="lower",
-        edge=25.0,
-        requirement=FOG_REQ,
-        criteria=[("ate_rmse", "<", 1.5), ("tracking_rate", ">=", 0.9)],
-        envelope=">= 25 m",
-        verdict="passed",
-        boundary=Boundary(15.12, 13.67, "m"),
-        termination="tolerance",
-        trials=trials,
-        margin=25.0 - 15.12,
-        previous=Boundary(17.0, 15.0, "m"),
-        reproduction="sal run orbslam3 euroc/MH_01 --perturb 'fog(visibility_m=13.67)'",
-    )
-
-
-def rain() -> Outcome:
-    """Failed at the edge (tracking lost there), boundary 12.5-15 mm/h, a contradiction; id with <script>."""
-    return Outcome(
-        test_id=XSS_ID,
-        system="reference_vo",
-        dataset="kitti/07",
-        parameter="rain.rate_mm_h",
-        worse="higher",
-        edge=20.0,
-        requirement="ate_rmse < 1 m wherever rain.rate_mm_h <= 20 mm/h",
-        criteria=[("ate_rmse", "<", 1.0)],
-        envelope="<= 20 mm/h",
-        verdict="failed",
-        boundary=Boundary(12.5, 15.0, "mm/h"),
-        termination="tolerance",
-        trials=[
-            Trial(20.0, False, m(None, 0.0), failed=["ate_rmse < 1 m"], wall_time_s=41.0),
-            Trial(10.0, True, m(0.31, 1.0), wall_time_s=38.0),
-            Trial(15.0, False, m(2.9, 0.7), failed=["ate_rmse < 1 m"], wall_time_s=40.0),
-            Trial(12.5, True, m(0.52, 1.0), wall_time_s=39.0),
-            Trial(17.5, True, m(0.9, 0.99), wall_time_s=39.0),
-        ],
-        contradictions=["17.5 mm/h passed but 15 mm/h (milder) failed"],
-        margin=12.5 - 20.0,
-        reproduction="sal run reference_vo kitti/07 --perturb 'rain(rate_mm_h=15)' --seed 0",
-    )
-
-
-def flaky() -> Outcome:
-    return Outcome(
-        test_id="tests/test_motion.py::test_blur",
-        system="orbslam3",
-        dataset="tum/fr1_desk",
-        parameter="motion_blur.length_px",
-        worse="higher",
-        edge=15.0,
-        requirement="ate_rmse < 0.1 m wherever motion_blur.length_px <= 15 px",
-        criteria=[("ate_rmse", "<", 0.1)],
-        envelope="<= 15 px",
-        verdict="flaky",
-        boundary=Boundary(15.0, 30.0, "px"),
-        termination="max_trials",
-        trials=[
-            Trial(15.0, False, m(0.12, 0.97), runs=[{"passed": p} for p in (True, False, False, True, False)], failed=["ate_rmse < 0.1 m"]),
-            Trial(30.0, False, m(0.4, 0.9), failed=["ate_rmse < 0.1 m"]),
-        ],
-        margin=0.0,
-        reproduction="sal run orbslam3 tum/fr1_desk --perturb 'motion_blur(length_px=15)'",
-    )
-
-
-def regressed() -> Outcome:
-    return Outcome(
-        test_id="tests/test_transport.py::test_drop",
-        system="orbslam3",
-        dataset="euroc/V1_01",
-        parameter="frame_drop.drop_rate",
-        worse="higher",
-        edge=10.0,
-        requirement="tracking_rate >= 0.8 wherever frame_drop.drop_rate <= 10 %",
-        criteria=[("tracking_rate", ">=", 0.8)],
-        envelope="<= 10 %",
-        verdict="passed",
-        boundary=Boundary(19.0, 20.0, "%"),
-        termination="tolerance",
-        trials=[
-            Trial(10.0, True, m(0.1, 0.95)),
-            Trial(19.0, True, m(0.2, 0.82)),
-            Trial(20.0, False, m(0.3, 0.7)),
-            Trial(18.0, True, m(0.2, 0.85)),
-        ],
-        margin=9.0,
-        previous=Boundary(30.0, 35.0, "%"),
-        regression="boundary moved from 30-35 % to 19-20 %, more than the tolerance (2 %)",
-        reproduction="sal run orbslam3 euroc/V1_01 --perturb 'frame_drop(drop_rate=20)'",
-    )
-
-
-def never_passed() -> Outcome:
-    return Outcome(
-        test_id="tests/test_weather.py::test_fog_night",
-        system="orbslam3",
-        dataset="kitti/07",
-        parameter="(night>>fog).visibility_m",
-        worse="lower",
-        edge=25.0,
-        requirement="ate_rmse < 1.5 m wherever (night>>fog).visibility_m >= 25 m",
-        criteria=[("ate_rmse", "<", 1.5)],
-        envelope=">= 25 m",
-        verdict="failed",
-        boundary=Boundary(None, 100000.0, "m"),
-        termination="not_bracketed",
-        trials=[Trial(25.0, False, m(None, 0.05)), Trial(100000.0, False, m(None, 0.1))],
-        margin=None,
-        reproduction="sal run orbslam3 kitti/07 --perturb 'night() >> fog(visibility_m=100000)'",
-    )
-
-
-def png(path: Path, size: tuple[int, int], level: int) -> Path:
-    image = np.full((*size, 3), level % 256, np.uint8)
-    cv2.circle(image, (size[1] // 2, size[0] // 2), 10, (0, 0, 255), -1)
-    assert cv2.imwrite(str(path), image)
-    return path
 
 
 @pytest.fixture
@@ -188,7 +43,7 @@ def test_summary_rows_hold_every_column(outcomes: list[Outcome]) -> None:
         "FAILED",
     )
     assert rows["tests/test_motion.py::test_blur"]["verdict"] == "FLAKY"
-    assert rows["tests/test_motion.py::test_blur"]["margin"] == "±0 px"
+    assert rows["tests/test_motion.py::test_blur"]["margin"] == "±0 km/h"
     d = rows["tests/test_transport.py::test_drop"]
     assert (d["change"], d["verdict"], d["status"]) == ("REGRESSED", "FAILED", "regressed")
     n = rows["tests/test_weather.py::test_fog_night"]
@@ -227,10 +82,10 @@ def test_markdown_has_counts_table_and_details_only_where_needed(outcomes: list[
     assert not any("test_fog[" in s for s in sections)  # passed: no details
     details = text.split("### ")
     drop = next(d for d in details if "test_drop" in d.splitlines()[0])
-    assert drop.startswith("REGRESSED: `tests/test_transport.py::test_drop`") and "previous boundary" in drop and "30-35 %" in drop
-    assert "**last pass** at 19 %" in drop and "**first fail** at 20 %" in drop and "tracking\\_rate 0.7" in drop
+    assert drop.startswith("REGRESSED: `tests/test_transport.py::test_drop`") and "previous boundary" in drop and "0.3-0.35" in drop
+    assert "**last pass** at 0.19:" in drop and "**first fail** at 0.2:" in drop and "tracking\\_rate 0.7" in drop
     rain_part = next(d for d in details if "test_rain" in d.splitlines()[0])
-    assert "`sal run reference_vo kitti/07 --perturb 'rain(rate_mm_h=15)' --seed 0`" in rain_part
+    assert f"`{rain().reproduction}`" in rain_part
     assert "17.5 mm/h passed but 15 mm/h (milder) failed" in rain_part
     assert "| 1 | 20 | fail | - | 0 | " in rain_part  # tracking lost: no ATE
     assert "<script>" not in text.replace("`test_weather.py::test_rain[<script>alert(1)</script>]`", "").replace(
@@ -309,19 +164,7 @@ def test_metric_plot_is_a_non_blank_png_with_markers_band_and_edge(tmp_path: Pat
 
 
 def test_a_sweep_point_without_envelope_trials_or_metrics_still_reports(tmp_path: Path) -> None:
-    point = Outcome(
-        test_id="test_sweep.py::test_levels[3]",
-        system="reference_vo",
-        dataset="synthetic",
-        parameter="noise.sigma",
-        worse="higher",
-        edge=None,
-        requirement="ate_rmse < 0.5 m",
-        criteria=[("ate_rmse", "<", 0.5)],
-        verdict="failed",
-        boundary=Boundary(None, None, ""),
-        termination="single",
-    )
+    point = sweep_point()
     (row,) = summary_rows([point])
     assert (row["requirement"], row["boundary"], row["trials"], row["margin"], row["change"]) == ("-", "unknown", "0", "-", "-")
     assert "### FAILED: `test_sweep.py::test_levels[3]`" in markdown_report([point])
@@ -329,8 +172,8 @@ def test_a_sweep_point_without_envelope_trials_or_metrics_still_reports(tmp_path
     assert "test_levels[3]" in page and "<img" not in page
     image = cv2.imread(str(metric_plot(point, tmp_path / "empty.png")))
     assert image is not None and image.shape == (600, 800, 3)
-    point.trials, point.boundary = [Trial(3.0, False, m(0.9, 1.0), failed=["ate_rmse < 0.5 m"])], Boundary(None, 3.0, "px")
-    assert summary_rows([point])[0]["boundary"] == "failed at 3 px"
+    point.trials, point.boundary = [Trial(3200.0, False, m(0.9, 1.0), failed=["ate_rmse < 0.5 m"])], Boundary(None, 3200.0, "ISO")
+    assert summary_rows([point])[0]["boundary"] == "failed at 3200 ISO"
 
 
 @needs_chromium
