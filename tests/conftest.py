@@ -26,8 +26,8 @@ SHARED_DATA = Path(os.environ.get("SAL_TEST_DATA", Path(__file__).resolve().pare
 
 
 #: Test modules marked ``slow`` (``-m "not slow"`` leaves them out: .ci/lowest runs the rest).
-#: Serial times on the busy 2-core machine (load average about 4); the fast rest took about
-#: 250 s serially there, which is about 90 s with ``-n 2`` on a quiet one.
+#: Serial times on the busy 2-core machine (load average about 4). The fast rest sums to about
+#: 190 s of test time; ``-m "not slow" -n 2`` took 110 s on the quiet 2-core machine.
 SLOW_MODULES = {
     "test_experiment_e2e.py",  # end-to-end experiments: perturb, evaluate, features (~70 s)
     "test_experiment_e2e_boundary.py",  # boundary searches with both real systems (~55 s)
@@ -38,7 +38,7 @@ SLOW_MODULES = {
 #: every parametrisation. Each module keeps a faster test of the same behaviour in the fast lane.
 SLOW_TESTS = {
     "test_ci_recipe.py::TestGateScript::*",  # sal-gate.sh: 6 CI runs of an inner suite under -n 2 (51 s)
-    # inner sessions under -n 2 (their [serial] twins stay fast; test_plugin_usage keeps its [xdist] ones)
+    # inner sessions under -n 2 (their [serial] twins stay fast)
     "test_plugin_history.py::test_history_warm_start_and_compare_fail[xdist]",  # (34 s)
     "test_plugin_requirements.py::*[xdist]",  # verdicts 20 s, cache 7.5 s, flaky 5.1 s, sweep 2.6 s, systems 2.6 s
     "test_pytest_html.py::*[xdist]",  # (5.0 s)
@@ -51,13 +51,30 @@ SLOW_TESTS = {
     "test_experiment_report.py::test_report_folder_can_be_moved_and_written_elsewhere",
     "test_experiment_report.py::test_broken_and_missing_parts_are_named_and_the_rest_is_built",
     "test_vocabulary.py::test_default_vocabulary",  # builds the k=10 L=6 ORB-SLAM3 vocabulary (10 s)
-    "test_modules_real_data.py::test_every_module_on_euroc_stereo[defocus]",  # (4.7 s)
+    # every module on real frames (each module's physics stays in the fast lane on synthetic
+    # frames, test_module_contract.py): 14 + 14 parametrisations (10.1 s in all)
+    "test_modules_real_data.py::test_every_module_on_euroc_stereo",
+    "test_modules_real_data.py::test_every_module_on_kitti_mono_with_a_monocular_depth_model",
     "test_features.py::test_compare_features_writes_json_and_pngs",  # (3.6 s)
     "test_reference_vo.py::test_kitti_07_mono",  # 140 real KITTI frames (3.5 s)
+    # reference_vo's accuracy per sensor (14.3 s in all; test_two_runs_give_identical_results stays)
+    "test_reference_vo.py::test_indoor_rgbd",
+    "test_reference_vo.py::test_urban_stereo",
+    "test_reference_vo.py::test_euroc_stereo_tracks_the_almost_static_camera",
+    "test_reference_vo.py::test_mono_runs_are_identical_too",
+    "test_reference_vo.py::test_indoor_mono_sim3",
     "test_evaluate_command.py::test_perturbed_frames_come_from_the_cache_sal_perturb_filled",  # (3.4 s)
     "test_evaluate_command.py::test_a_failed_or_raising_run_is_recorded_and_the_rest_continues",  # (2.6 s)
     "test_metrics.py::test_rpe_matches_evo_rpe_command_line[kitti00-orb-100m]",  # (2.0 s)
-    "test_example_configs.py::test_perturb_synthetic[urban_rain_blur.yaml]",  # (2.1 s)
+    # every shipped config perturbed end to end (17 s in all; test_robustness_boundary_is_searchable
+    # and the configs' validation stay)
+    "test_example_configs.py::test_perturb_synthetic",
+    "test_example_configs.py::test_perturb_real_data",
+    # H.264 at several targets and on real KITTI (5.4 s; lower rate gives lower PSNR, identical bytes stay)
+    "test_transport.py::test_bandwidth_hits_the_target_rate_on_the_synthetic_street",
+    "test_transport.py::test_bandwidth_hits_the_target_on_real_kitti_at_its_own_frame_rate",
+    "test_transport.py::test_bandwidth_h265_and_capped_variable_rate",
+    "test_plugin_usage.py::*[xdist]",  # misuse under -n 2 (6.9 s; the [serial] twins stay)
     "test_interrupt.py::test_ctrl_c_during_the_search_is_pytests_interrupted_summary[test_fog]",  # (3.1 s; test_point stays)
 }
 #: Tests that run the real ORB-SLAM3 (pyorbslam3), marked ``real_slam`` and ``slow``, as patterns
