@@ -21,6 +21,11 @@ import pytest_sal.testing  # noqa: F401
 # the first to run in its process (test_plugin_history.py alone, or first on an xdist worker).
 pytest_plugins = ["pytester"]
 
+#: Helper modules that test modules load with ``pytest_plugins`` for the fixtures they share:
+#: registered for assertion rewriting before a test module imports their helpers too.
+FIXTURE_MODULES = ("command_programs",)
+pytest.register_assert_rewrite(*FIXTURE_MODULES)
+
 #: The real KITTI / EuRoC / TUM excerpts; override with SAL_TEST_DATA.
 SHARED_DATA = Path(os.environ.get("SAL_TEST_DATA", Path(__file__).resolve().parents[1].parent / "shared" / "data"))
 
