@@ -23,7 +23,7 @@ pytest_plugins = ["pytester"]
 
 #: Helper modules that test modules load with ``pytest_plugins`` for the fixtures they share:
 #: registered for assertion rewriting before a test module imports their helpers too.
-FIXTURE_MODULES = ("command_programs", "depth_sequences")
+FIXTURE_MODULES = ("command_programs", "depth_sequences", "euroc_excerpt")
 pytest.register_assert_rewrite(*FIXTURE_MODULES)
 
 #: The real KITTI / EuRoC / TUM excerpts; override with SAL_TEST_DATA.

@@ -348,7 +348,7 @@ def test_perturb_real_data(
     rc, _, err = _perturb(path, tmp_path / "cache", capsys)
     assert rc == 0, err
     if kind == "euroc":
-        # the real excerpt's cam1/data.csv lists 4 images that do not exist (see tests/test_euroc.py)
+        # the real excerpt's cam1/data.csv lists 4 images that do not exist (see tests/test_euroc_errors.py)
         assert "sal: warning:" in err and "cam1/data.csv" in err
     else:
         assert "sal: warning:" not in err, err
