@@ -23,7 +23,7 @@ pytest_plugins = ["pytester"]
 
 #: Helper modules that test modules load with ``pytest_plugins`` for the fixtures they share:
 #: registered for assertion rewriting before a test module imports their helpers too.
-FIXTURE_MODULES = ("command_programs", "depth_sequences", "euroc_excerpt")
+FIXTURE_MODULES = ("command_programs", "depth_sequences", "euroc_excerpt", "transport_sequences")
 pytest.register_assert_rewrite(*FIXTURE_MODULES)
 
 #: The real KITTI / EuRoC / TUM excerpts; override with SAL_TEST_DATA.
@@ -76,9 +76,9 @@ SLOW_TESTS = {
     "test_example_configs.py::test_perturb_synthetic",
     "test_example_configs.py::test_perturb_real_data",
     # H.264 at several targets and on real KITTI (5.4 s; lower rate gives lower PSNR, identical bytes stay)
-    "test_transport.py::test_bandwidth_hits_the_target_rate_on_the_synthetic_street",
-    "test_transport.py::test_bandwidth_hits_the_target_on_real_kitti_at_its_own_frame_rate",
-    "test_transport.py::test_bandwidth_h265_and_capped_variable_rate",
+    "test_transport_bandwidth.py::test_bandwidth_hits_the_target_rate_on_the_synthetic_street",
+    "test_transport_bandwidth.py::test_bandwidth_hits_the_target_on_real_kitti_at_its_own_frame_rate",
+    "test_transport_bandwidth.py::test_bandwidth_h265_and_capped_variable_rate",
     "test_plugin_usage.py::*[xdist]",  # misuse under -n 2 (6.9 s; the [serial] twins stay)
     "test_interrupt.py::test_ctrl_c_during_the_search_is_pytests_interrupted_summary[test_fog]",  # (3.1 s; test_point stays)
 }
