@@ -73,8 +73,8 @@ SLOW_TESTS = {
     "test_metrics.py::test_rpe_matches_evo_rpe_command_line[kitti00-orb-100m]",  # (2.0 s)
     # every shipped config perturbed end to end (17 s in all; test_robustness_boundary_is_searchable
     # and the configs' validation stay)
-    "test_example_configs.py::test_perturb_synthetic",
-    "test_example_configs.py::test_perturb_real_data",
+    "test_example_configs_perturb.py::test_perturb_synthetic",
+    "test_example_configs_perturb.py::test_perturb_real_data",
     # H.264 at several targets and on real KITTI (5.4 s; lower rate gives lower PSNR, identical bytes stay)
     "test_transport_bandwidth.py::test_bandwidth_hits_the_target_rate_on_the_synthetic_street",
     "test_transport_bandwidth.py::test_bandwidth_hits_the_target_on_real_kitti_at_its_own_frame_rate",

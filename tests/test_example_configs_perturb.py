@@ -1,13 +1,11 @@
-"""The example experiment configs in ``example_suites/configs/`` (the paper's table of severities):
-each one loads, names a searchable robustness boundary, and runs ``sal perturb`` end to end, on
-the synthetic world as shipped (fewer frames) and on a real dataset excerpt with only its
-``dataset`` block changed. Graded severities (``<x>_light``, ``<x>_moderate``, ``<x>_heavy``)
-must really grade: the written frames move further from the clean ones from light to heavy."""
+"""The example experiment configs run ``sal perturb`` end to end, on the synthetic world as
+shipped (fewer frames) and on a real dataset excerpt with only its ``dataset`` block changed.
+Graded severities (``<x>_light``, ``<x>_moderate``, ``<x>_heavy``) must really grade: the written
+frames move further from the clean ones from light to heavy."""
 
 from __future__ import annotations
 
 import json
-import re
 from itertools import pairwise
 from pathlib import Path
 from typing import Any
@@ -15,84 +13,28 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
+from example_config_table import CONFIGS, GRADES, NAMES, WORLD, _groups, _params, _real_kind, _steps
 
 from pytest_sal.cli.main import main
 from pytest_sal.experiment.config import build_sequence, load_config
-from pytest_sal.experiment.schema import ExperimentConfig, build_module
-from sal_adapters import DatasetWarning, open_dataset
+from pytest_sal.experiment.schema import ExperimentConfig
+from sal_adapters import DatasetWarning, Sequence, open_dataset
 from sal_adapters.images import read_image
-from sal_modules import Composite, module_class
+from sal_modules import module_class
 
-CONFIGS = Path(__file__).resolve().parents[1] / "example_suites" / "configs"
-FILES = sorted(CONFIGS.glob("*.yaml"))
-NAMES = [f.name for f in FILES]
-
-URBAN = ["urban_rain.yaml", "urban_soiling.yaml", "urban_rain_soiling.yaml", "urban_night_fog.yaml", "urban_rain_blur.yaml"]
-INDOOR = ["indoor_soiling.yaml", "indoor_crack.yaml", "indoor_soiling_crack.yaml"]
-STEREO = ["stereo_bandwidth.yaml", "stereo_frame_drop.yaml"]
-REQUIRED = URBAN + INDOOR + STEREO  # the table's ten rows, each graded light / moderate / heavy
-ORIGINAL = ["fog_rain_urban.yaml", "indoor_camera.yaml"]
-
-#: Module types each required config must exercise (a composite's steps in order).
-MODULES = {
-    "urban_rain.yaml": ["rain"],
-    "urban_soiling.yaml": ["lens_soiling"],
-    "urban_rain_soiling.yaml": ["rain", "lens_soiling"],
-    "urban_night_fog.yaml": ["night", "fog"],
-    "urban_rain_blur.yaml": ["rain", "motion_blur"],
-    "indoor_soiling.yaml": ["lens_soiling"],
-    "indoor_crack.yaml": ["cracked_lens"],
-    "indoor_soiling_crack.yaml": ["lens_soiling", "cracked_lens"],
-    "stereo_bandwidth.yaml": ["bandwidth"],
-    "stereo_frame_drop.yaml": ["frame_drop"],
-}
-WORLD = {**{n: ("urban", "stereo") for n in URBAN}, **{n: ("indoor", "rgbd") for n in INDOOR}, **{n: ("indoor", "stereo") for n in STEREO}}
-WORLD.update({"fog_rain_urban.yaml": ("urban", "stereo"), "indoor_camera.yaml": ("indoor", "rgbd")})
-
-GRADES = ("light", "moderate", "heavy")
-GRADED = re.compile(r"^(?P<stem>.+)_(?P<grade>light|moderate|heavy)$")
 FRAMES = 3  # synthetic frames per test run (the files ship with 20)
+
+
 REAL_FRAMES = 3
+
+
 MIN_MAD = 0.25  # grey levels: a perturbed frame differs from the clean one by more than this on average
 
+
 KITTI_SEQ = Path("kitti") / "sequences" / "07"
+
+
 EUROC_SEQ = Path("euroc") / "V1_01_easy_micro"
-
-
-def _real_kind(name: str) -> str:
-    if name.startswith("urban_") or name == "fog_rain_urban.yaml":
-        return "kitti"
-    if name.startswith("indoor_"):
-        return "tum"
-    if name.startswith("stereo_"):
-        return "euroc"
-    raise AssertionError(f"no real dataset pairing for {name}")
-
-
-# ------------------------------------------------------------------------------ helpers
-
-
-def _steps(config: ExperimentConfig, name: str) -> list[str]:
-    pert = next(p for p in config.perturbations if p.name == name)
-    return [s.type for s in pert.modules] if pert.type == "composite" else [pert.type]
-
-
-def _params(config: ExperimentConfig, name: str, step: str) -> dict[str, Any]:
-    pert = next(p for p in config.perturbations if p.name == name)
-    if pert.type == "composite":
-        return dict(next(s for s in pert.modules if s.type == step).parameters)
-    assert pert.type == step
-    return dict(pert.parameters)
-
-
-def _groups(config: ExperimentConfig) -> dict[str, dict[str, str]]:
-    """``{stem: {grade: perturbation name}}`` of the enabled graded perturbations."""
-    groups: dict[str, dict[str, str]] = {}
-    for p in config.enabled():
-        m = GRADED.match(p.name)
-        if m:
-            groups.setdefault(m["stem"], {})[m["grade"]] = p.name
-    return groups
 
 
 def _needs_depth(config: ExperimentConfig) -> bool:
@@ -156,72 +98,6 @@ def _assert_grades(config: ExperimentConfig, diffs: dict[str, float], kept: dict
         if "bandwidth" in _steps(config, order[0]):
             rates = [_params(config, n, "bandwidth")["target_mbps"] for n in order]
             assert all(a > b for a, b in pairwise(rates)), f"{stem}: target_mbps must fall light -> heavy: {rates}"
-
-
-# ------------------------------------------------------------------------------ 1. the files
-
-
-def test_the_table_is_complete() -> None:
-    missing = sorted(set(REQUIRED + ORIGINAL) - set(NAMES))
-    assert not missing, f"example configs missing from {CONFIGS}: {missing}"
-
-
-@pytest.mark.parametrize("name", NAMES)
-def test_config_loads(name: str) -> None:
-    config = load_config(CONFIGS / name)
-    assert config.experiment.name == Path(name).stem
-    ds = config.dataset
-    assert ds.type == "synthetic" and ds.path is None
-    assert name in WORLD, f"{name}: add it to WORLD (and to the real-data pairing) in this test"
-    scene, sensor = WORLD[name]
-    assert ds.options["scene"] == scene
-    assert ds.options.get("sensor", "stereo" if scene == "urban" else "rgbd") == sensor
-    assert ds.max_frames == 20 and ds.options["frames"] == 20
-    assert config.output.base_dir == Path("results") and not config.output.create_timestamp_dir
-    text = (CONFIGS / name).read_text()
-    for command in ("perturb", "evaluate", "boundary", "features"):
-        assert f"#   sal {command} example_suites/configs/{name}" in text, f"{name}: header lacks the sal {command} line"
-    kind = _real_kind(name)
-    assert re.search(rf"# real data: type: {kind}, path: /data/", text), (
-        f"{name}: dataset block lacks the '# real data: type: {kind}' comment"
-    )
-    if name in REQUIRED:
-        names = [p.name for p in config.enabled()]
-        groups = _groups(config)
-        assert len(groups) == 1 and len(names) == 3, f"{name}: expected one light/moderate/heavy group, got {names}"
-        (grades,) = groups.values()
-        assert set(grades) == set(GRADES)
-        for pert in names:
-            assert _steps(config, pert) == MODULES[name]
-
-
-# ------------------------------------------------------------------------------ 2. the boundary
-
-
-@pytest.mark.parametrize("name", NAMES)
-def test_robustness_boundary_is_searchable(name: str) -> None:
-    config = load_config(CONFIGS / name)
-    rb = config.robustness_boundary
-    assert rb is not None and rb.enabled, f"{name}: robustness_boundary must be present and enabled"
-    target = next(p for p in config.perturbations if p.name == rb.target_perturbation)
-    assert target.enabled and target.type != "none"
-    module = build_module(target)
-    if isinstance(module, Composite):
-        step, _, param = rb.parameter.partition(".")
-        assert param, f"{name}: a composite's parameter is addressed <step>.<param>, got {rb.parameter!r}"
-        position, spec = module.param(rb.parameter)
-        assert module.steps[position].name == step == rb.module
-    else:
-        assert "." not in rb.parameter
-        spec = type(module).parameters()[rb.parameter]
-        assert rb.module == module.name == target.type
-    assert spec.searchable
-    space = spec.search_space()
-    assert space.min <= rb.lower_bound < rb.upper_bound <= space.max
-    assert 0 < rb.tolerance < rb.upper_bound - rb.lower_bound
-    assert 6 <= rb.max_iters <= 8
-    assert rb.ate_rmse_fail > 0
-    assert rb.name
 
 
 # ------------------------------------------------------------------------------ 3. synthetic run
@@ -314,6 +190,66 @@ def mono_depth_model(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return depth_model(tmp_path_factory.mktemp("depth-model") / "mono_depth.onnx", gain=8.0, offset=20.0)
 
 
+def _assert_kitti_refused_without_depth(path: Path, root: Path, cache: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The KITTI excerpt is mono (image_0 only): rain, fog and motion blur need metric depth,
+    and neither native depth nor stereo matching applies. sal perturb must refuse before
+    writing anything and name each missing provider and the way out (a mono ONNX model)."""
+    rc, _, err = _perturb(path, cache, capsys)
+    assert rc == 2
+    assert "needs depth and no depth provider applies to 'kitti/07'" in err
+    assert "native: sequence 'kitti/07' (mono) has no depth maps" in err
+    assert "stereo: sequence 'kitti/07' is mono, not a stereo pair" in err
+    assert "SAL_DEPTH_MODEL=model.onnx" in err
+    assert not (root / "images").exists()
+
+
+def _clean_sequence(kind: str, config: ExperimentConfig) -> Sequence:
+    """The config's unperturbed real sequence (the EuRoC excerpt warns of its 4 missing images)."""
+    if kind == "euroc":
+        with pytest.warns(DatasetWarning, match=r"cam1/data\.csv: 4 of 99 rows skipped"):
+            return build_sequence(config)
+    return build_sequence(config)
+
+
+def _written_frames(
+    pert: str, folder: Path, src: Path, pairs: list[tuple[str, str]], n_kept: int, n_in: int
+) -> tuple[list[str], list[float]]:
+    """The file names written into each ``(written, source)`` folder pair of ``folder`` (those of
+    the last pair) and each written frame's mean absolute difference to its source (grey levels)."""
+    names: list[str] = []
+    per_frame = []
+    for written_dir, source_dir in pairs:
+        names = sorted(f.name for f in (folder / written_dir).iterdir())
+        source_names = sorted(f.name for f in (src / source_dir).iterdir())
+        # the dataset's own layout and file names: the first frames of the source, less the dropped ones
+        assert set(names) <= set(source_names[:n_in]), f"{pert}: {written_dir} holds files other than the first {n_in} of the source"
+        assert len(names) == n_kept
+        for file_name in names:
+            per_frame.append(_mad(read_image(folder / written_dir / file_name), read_image(src / source_dir / file_name)))
+    return names, per_frame
+
+
+def _assert_written_layout(pert: str, folder: Path, kind: str, n_in: int, n_kept: int) -> None:
+    """``folder`` holds the dataset kind's own layout (RGB-D depth maps too) and reads back with
+    the adapter of its kind, ``n_kept`` of the ``n_in`` frames."""
+    layout = {
+        "kitti": ["sequences/07/times.txt", "sequences/07/calib.txt"],
+        "tum": ["rgb.txt", "depth.txt"],
+        "euroc": [f"{EUROC_SEQ.name}/mav0/cam0/data.csv", f"{EUROC_SEQ.name}/mav0/cam1/data.csv"],
+    }[kind]
+    for listed in layout:
+        assert (folder / listed).is_file(), f"{pert}: {listed} missing from the written {kind} layout"
+    if kind == "tum":  # RGB-D: the depth maps travel with the perturbed colour frames
+        assert len(list((folder / "depth").glob("*.png"))) == n_in
+    if kind == "kitti":  # each reads back with the adapter of its kind
+        back = open_dataset("kitti", folder / "sequences" / "07")
+    elif kind == "euroc":
+        back = open_dataset("euroc", folder / EUROC_SEQ.name, stereo=True)
+    else:
+        back = open_dataset("tum", folder)
+    assert len(back) == n_kept
+
+
 @pytest.mark.parametrize("name", NAMES)
 def test_perturb_real_data(
     name: str,
@@ -332,16 +268,7 @@ def test_perturb_real_data(
     monkeypatch.delenv("SAL_DEPTH_MODEL", raising=False)
 
     if kind == "kitti" and _needs_depth(config):
-        # The KITTI excerpt is mono (image_0 only): rain, fog and motion blur need metric depth,
-        # and neither native depth nor stereo matching applies. sal perturb must refuse before
-        # writing anything and name each missing provider and the way out (a mono ONNX model).
-        rc, _, err = _perturb(path, tmp_path / "cache", capsys)
-        assert rc == 2
-        assert "needs depth and no depth provider applies to 'kitti/07'" in err
-        assert "native: sequence 'kitti/07' (mono) has no depth maps" in err
-        assert "stereo: sequence 'kitti/07' is mono, not a stereo pair" in err
-        assert "SAL_DEPTH_MODEL=model.onnx" in err
-        assert not (root / "images").exists()
+        _assert_kitti_refused_without_depth(path, root, tmp_path / "cache", capsys)
         # The product's monocular ONNX provider then makes the same config run on the same data.
         monkeypatch.setenv("SAL_DEPTH_MODEL", str(request.getfixturevalue("mono_depth_model")))
 
@@ -352,12 +279,7 @@ def test_perturb_real_data(
         assert "sal: warning:" in err and "cam1/data.csv" in err
     else:
         assert "sal: warning:" not in err, err
-    if kind == "euroc":
-        with pytest.warns(DatasetWarning, match=r"cam1/data\.csv: 4 of 99 rows skipped"):
-            clean = build_sequence(config)
-    else:
-        clean = build_sequence(config)
-    n_in = len(clean)
+    n_in = len(_clean_sequence(kind, config))
     assert n_in == min(REAL_FRAMES, 2 if kind == "tum" else REAL_FRAMES)
     written_any = 0
     kept: dict[str, list[str]] = {}
@@ -366,19 +288,8 @@ def test_perturb_real_data(
         folder = root / "images" / pert.name
         assert folder.is_dir(), f"{folder} was not written"
         dropped = set(_dropped(folder))
-        per_frame = []
-        for written_dir, source_dir in pairs:
-            names = sorted(f.name for f in (folder / written_dir).iterdir())
-            source_names = sorted(f.name for f in (src / source_dir).iterdir())
-            # the dataset's own layout and file names: the first frames of the source, less the dropped ones
-            assert set(names) <= set(source_names[:n_in]), (
-                f"{pert.name}: {written_dir} holds files other than the first {n_in} of the source"
-            )
-            assert len(names) == n_in - len(dropped)
-            kept[pert.name] = names
-            for file_name in names:
-                per_frame.append(_mad(read_image(folder / written_dir / file_name), read_image(src / source_dir / file_name)))
-                written_any += 1
+        kept[pert.name], per_frame = _written_frames(pert.name, folder, src, pairs, n_in - len(dropped), n_in)
+        written_any += len(per_frame)
         diffs[pert.name] = float(np.mean(per_frame))
         record_property(f"mad_{pert.name}", round(diffs[pert.name], 3))
         if _drops_frames(config, pert.name):
@@ -386,21 +297,6 @@ def test_perturb_real_data(
         else:
             assert not dropped
             assert diffs[pert.name] > MIN_MAD, f"{pert.name}: written frames barely differ from the originals ({diffs[pert.name]:.3f})"
-        layout = {
-            "kitti": ["sequences/07/times.txt", "sequences/07/calib.txt"],
-            "tum": ["rgb.txt", "depth.txt"],
-            "euroc": [f"{EUROC_SEQ.name}/mav0/cam0/data.csv", f"{EUROC_SEQ.name}/mav0/cam1/data.csv"],
-        }[kind]
-        for listed in layout:
-            assert (folder / listed).is_file(), f"{pert.name}: {listed} missing from the written {kind} layout"
-        if kind == "tum":  # RGB-D: the depth maps travel with the perturbed colour frames
-            assert len(list((folder / "depth").glob("*.png"))) == n_in
-        if kind == "kitti":  # each reads back with the adapter of its kind
-            back = open_dataset("kitti", folder / "sequences" / "07")
-        elif kind == "euroc":
-            back = open_dataset("euroc", folder / EUROC_SEQ.name, stereo=True)
-        else:
-            back = open_dataset("tum", folder)
-        assert len(back) == n_in - len(dropped)
+        _assert_written_layout(pert.name, folder, kind, n_in, n_in - len(dropped))
     assert written_any
     _assert_grades(config, diffs, kept, n_in)  # the levels grade on real frames too
