@@ -48,8 +48,8 @@ SLOW_TESTS = {
     "test_plugin_requirements.py::*[xdist]",  # verdicts 20 s, cache 7.5 s, flaky 5.1 s, sweep 2.6 s, systems 2.6 s
     "test_pytest_html.py::*[xdist]",  # (5.0 s)
     "test_plugin_live.py::*[xdist]",  # (3.4 s)
-    "test_outputs.py::test_kill_9_of_a_rerun_keeps_the_previous_output",  # (16 s)
-    "test_outputs.py::test_outputs_and_caches_get_the_umask_permissions[umask-077]",  # (4.0 s; umask 022 stays)
+    "test_outputs_commands.py::test_kill_9_of_a_rerun_keeps_the_previous_output",  # (16 s)
+    "test_outputs_commands.py::test_outputs_and_caches_get_the_umask_permissions[umask-077]",  # (4.0 s; umask 022 stays)
     # the experiment folder the page tests share: sal perturb, evaluate, boundary and features (13 s setup)
     "test_experiment_report.py::test_page_*",
     "test_experiment_report.py::test_example_frames_show_the_same_moment_of_every_sequence",

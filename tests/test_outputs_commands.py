@@ -1,6 +1,6 @@
-"""Outputs are replaced whole or not at all, with the umask's permissions, and a write that
-fails names its path (issue 12, points 2, 3, 6 and 7), on ``sal perturb`` over a small
-synthetic experiment and on the helper ``sal_adapters.atomic`` itself:
+"""The ``sal`` commands' outputs are replaced whole or not at all, with the umask's permissions,
+and a write that fails names its path (issue 12, points 2, 3, 6 and 7), on ``sal perturb`` over a
+small synthetic experiment:
 
 * ``sal perturb --dry-run`` leaves the caches, the output folder and HOME as they were;
 * ``kill -9`` of a ``sal perturb`` rerun at 0.3 s, 1 s, 2 s, when its first staging folder
@@ -8,9 +8,7 @@ synthetic experiment and on the helper ``sal_adapters.atomic`` itself:
   run cleans the leftovers;
 * a full disk or a file where a folder belongs: one ``sal: error: cannot write PATH: ...``;
 * ``sal evaluate`` and ``sal report`` stopped midway: the previous results stay whole;
-* files 0644 and folders 0755 under umask 022, private under 077;
-* ``write_sequence`` into a symlink loop: one error naming the path.
-"""
+* files 0644 and folders 0755 under umask 022, private under 077."""
 
 from __future__ import annotations
 
@@ -28,17 +26,15 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from output_leftovers import LEFTOVER, leftovers
 
 from pytest_sal.cli.main import main
 from pytest_sal.testing import FakeSlam
-from sal_adapters import SalError, atomic, open_dataset, write_sequence
-from sal_adapters.atomic import Replacement, recover, replacing_dir
-from sal_adapters.errors import WriteError
-from sal_adapters.textfiles import atomic_write_text
+from sal_adapters import SalError
 from sal_wrappers import SYSTEMS
 
 NAME = "outputs"
-LEFTOVER = (".sal-tmp-", ".sal-old-")
+
 
 CONFIG = """\
 experiment: {{name: {name}, seed: 3}}
@@ -69,10 +65,6 @@ def snapshot(root: Path) -> dict[str, str]:
             continue
         found[rel] = "dir" if path.is_dir() else hashlib.sha256(path.read_bytes()).hexdigest()
     return found
-
-
-def leftovers(root: Path) -> list[str]:
-    return [p.relative_to(root).as_posix() for p in root.rglob("*") if any(mark in p.name for mark in LEFTOVER)]
 
 
 def sal(*args: str | Path, cwd: Path, **kwargs: object) -> subprocess.Popen[bytes]:
@@ -257,32 +249,6 @@ def test_a_file_where_the_output_folder_belongs_is_one_line(
     assert error_line(capsys) == f"sal: error: cannot write {images / 'fog'}: {images} is a file, not a folder"
 
 
-def test_atomic_write_on_a_full_disk_names_the_file_and_keeps_the_old_one(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    path = atomic_write_text(tmp_path / "history" / "run.json", "old\n")
-    monkeypatch.setattr(os, "fsync", lambda fd: (_ for _ in ()).throw(OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))))
-
-    with pytest.raises(WriteError) as caught:
-        atomic_write_text(path, "new\n")
-
-    assert str(caught.value) == f"cannot write {path}: No space left on device"
-    assert caught.value.errno == errno.ENOSPC and isinstance(caught.value, SalError)
-    assert path.read_text() == "old\n" and os.listdir(path.parent) == ["run.json"]
-
-
-def test_write_sequence_into_a_symlink_loop_names_the_path(tmp_path: Path) -> None:
-    (tmp_path / "a").symlink_to(tmp_path / "b")
-    (tmp_path / "b").symlink_to(tmp_path / "a")
-    sequence = open_dataset("synthetic", scene="urban", frames=1, sensor="mono")
-    target = tmp_path / "a" / "out"
-
-    with pytest.raises(SalError) as caught:
-        write_sequence(sequence, target)
-
-    message = str(caught.value)
-    assert str(target) in message and ("symlink loop" in message or "symbolic links" in message)
-    assert "\n" not in message
-
-
 class StoppingSlam(FakeSlam):
     """FakeSlam that stops the evaluation (a ``SalError``) when it meets the rain."""
 
@@ -345,66 +311,3 @@ def test_outputs_and_caches_get_the_umask_permissions(tmp_path: Path, umask: int
             assert mode == (dir_mode if path.is_dir() else file_mode), f"{path}: {mode:o}"
             checked += 1
     assert checked > 50
-
-
-# -------------------------------------------------------------------------------- the helper
-
-
-def test_a_failed_replacement_keeps_the_old_folder_and_leaves_nothing(tmp_path: Path) -> None:
-    target = tmp_path / "out"
-    (target / "sub").mkdir(parents=True)
-    (target / "sub" / "old.txt").write_text("old")
-
-    with pytest.raises(RuntimeError), replacing_dir(target) as staging:
-        (staging / "new.txt").write_text("half")
-        raise RuntimeError("the run failed")
-
-    assert (target / "sub" / "old.txt").read_text() == "old" and not (target / "new.txt").exists()
-    assert os.listdir(tmp_path) == ["out"]
-
-
-@pytest.mark.parametrize("exchange", [True, False], ids=["renameat2", "two-renames"])
-def test_replacement_swaps_folders_and_files_together(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, exchange: bool) -> None:
-    if not exchange:
-        monkeypatch.setattr(atomic, "_exchange", lambda a, b: False)
-    page = tmp_path / "page"
-    (page / "assets").mkdir(parents=True)
-    (page / "assets" / "old.png").write_bytes(b"old")
-    (page / "index.html").write_text("old page")
-    (page / "notes.txt").write_text("the user's")
-
-    with Replacement() as outputs:
-        staged = outputs.entries(page)
-        (staged / "assets").mkdir()
-        (staged / "assets" / "new.png").write_bytes(b"new")
-        (staged / "index.html").write_text("new page")
-        folder = outputs.folder(tmp_path / "data")
-        (folder / "x").write_text("x")
-        outputs.write_text(tmp_path / "results.json", "{}\n")
-
-    assert sorted(os.listdir(page)) == ["assets", "index.html", "notes.txt"]
-    assert os.listdir(page / "assets") == ["new.png"] and (page / "index.html").read_text() == "new page"
-    assert (tmp_path / "data" / "x").read_text() == "x" and (tmp_path / "results.json").read_text() == "{}\n"
-    assert leftovers(tmp_path) == []
-
-
-def _dead_pid() -> int:
-    child = subprocess.Popen([sys.executable, "-c", "pass"])
-    child.wait()
-    return child.pid
-
-
-def test_recover_puts_back_an_old_version_and_removes_dead_leftovers(tmp_path: Path) -> None:
-    dead = _dead_pid()
-    old = tmp_path / f".out.sal-old-{dead}-00ff"  # killed between the two renames
-    old.mkdir()
-    (old / "kept.txt").write_text("previous")
-    (tmp_path / f".out.sal-tmp-{dead}-0a0b").mkdir()  # its complete new copy, never moved in
-    (tmp_path / f".other.sal-tmp-{dead}-0c0d").write_text("half")
-    running = tmp_path / f".out.sal-tmp-{os.getpid()}-0e0f"  # a replacement in progress
-    running.mkdir()
-
-    recover(tmp_path)
-
-    assert (tmp_path / "out" / "kept.txt").read_text() == "previous"
-    assert sorted(os.listdir(tmp_path)) == sorted(["out", running.name])
