@@ -12,7 +12,6 @@ __all__ = ["BASE", "REPO", "_key"]
 
 REPO = Path(__file__).resolve().parents[1]
 
-
 BASE = {
     "dataset": "f" * 64,
     "module": {"name": "fog", "version": 2, "params": {"visibility_m": 30.5, "density": "uniform"}},

@@ -34,10 +34,7 @@ __all__ = [
 
 
 OK, LOST, NI = TrackState.OK, TrackState.LOST, TrackState.NOT_INITIALISED
-
-
 NOISE = 0.001  # the fake program adds NOISE * frame position to x
-
 
 FAKE_SLAM = r"""
 import argparse, json, math, os, sys
@@ -143,7 +140,6 @@ with open(a.out, "w") as fh:
         sys.exit(f"unknown format {f}")
 print(f"fake_slam: wrote {len(out)} poses to {a.out}")
 """
-
 
 SCRIPTS = {
     "fake_slam.py": FAKE_SLAM,

@@ -32,28 +32,14 @@ __all__ = [
 
 
 CONFIGS = Path(__file__).resolve().parents[1] / "example_suites" / "configs"
-
-
 FILES = sorted(CONFIGS.glob("*.yaml"))
-
-
 NAMES = [f.name for f in FILES]
 
-
 URBAN = ["urban_rain.yaml", "urban_soiling.yaml", "urban_rain_soiling.yaml", "urban_night_fog.yaml", "urban_rain_blur.yaml"]
-
-
 INDOOR = ["indoor_soiling.yaml", "indoor_crack.yaml", "indoor_soiling_crack.yaml"]
-
-
 STEREO = ["stereo_bandwidth.yaml", "stereo_frame_drop.yaml"]
-
-
 REQUIRED = URBAN + INDOOR + STEREO  # the table's ten rows, each graded light / moderate / heavy
-
-
 ORIGINAL = ["fog_rain_urban.yaml", "indoor_camera.yaml"]
-
 
 #: Module types each required config must exercise (a composite's steps in order).
 MODULES = {
@@ -68,17 +54,10 @@ MODULES = {
     "stereo_bandwidth.yaml": ["bandwidth"],
     "stereo_frame_drop.yaml": ["frame_drop"],
 }
-
-
 WORLD = {**{n: ("urban", "stereo") for n in URBAN}, **{n: ("indoor", "rgbd") for n in INDOOR}, **{n: ("indoor", "stereo") for n in STEREO}}
-
-
 WORLD.update({"fog_rain_urban.yaml": ("urban", "stereo"), "indoor_camera.yaml": ("indoor", "rgbd")})
 
-
 GRADES = ("light", "moderate", "heavy")
-
-
 GRADED = re.compile(r"^(?P<stem>.+)_(?P<grade>light|moderate|heavy)$")
 
 

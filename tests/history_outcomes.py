@@ -13,8 +13,6 @@ __all__ = ["DROP", "FOG", "drop", "fog", "save"]
 
 
 FOG = "tests/test_fog.py::test_fog_visibility"
-
-
 DROP = "tests/test_transport.py::test_frame_drop"
 
 

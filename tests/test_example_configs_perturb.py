@@ -23,17 +23,10 @@ from sal_adapters.images import read_image
 from sal_modules import module_class
 
 FRAMES = 3  # synthetic frames per test run (the files ship with 20)
-
-
 REAL_FRAMES = 3
-
-
 MIN_MAD = 0.25  # grey levels: a perturbed frame differs from the clean one by more than this on average
 
-
 KITTI_SEQ = Path("kitti") / "sequences" / "07"
-
-
 EUROC_SEQ = Path("euroc") / "V1_01_easy_micro"
 
 

@@ -20,8 +20,6 @@ from sal_adapters.synthetic.geometry import BoxBuilder
 from sal_adapters.synthetic.render import Renderer, Stage
 
 SCENES = ("urban", "indoor")
-
-
 #: fx, fy, cx, cy, width, height, fps, baseline (m), depth scale
 SPEC = {
     "urban": (718.856, 718.856, 607.1928, 185.2157, 1240, 376, 10.0, 0.54, None),

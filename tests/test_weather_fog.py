@@ -19,8 +19,6 @@ from sal_modules.weather.fog import (
 from sal_modules.weather.noise import GradientNoise
 
 KOSCHMIEDER = 3.912
-
-
 #: numpy >= 2.0 names it trapezoid; 1.26 (the lowest supported) only has trapz
 _trapezoid = getattr(np, "trapezoid", None) or np.trapz
 
