@@ -11,7 +11,7 @@ from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import pytest
-from test_history import FOG, drop, fog, save
+from history_outcomes import FOG, drop, fog, save
 
 from pytest_sal.cli.main import main
 from pytest_sal.history.gate import NOT_COMPARED, compare_with_baseline, space_form_problem
