@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from pytest_sal.engine.outcome import Outcome, Trial
+from pytest_sal.engine.quantity import with_unit
 from pytest_sal.engine.requirements import METRICS
 from sal_adapters.suggest import closest
 
@@ -50,7 +51,7 @@ class RegressionCheck(ABC):
         return change > self.limit * (1 + _EPS) + _EPS * 1e-3
 
     def _limit_text(self, unit: str) -> str:
-        return f"{self.limit:g} %" if self.relative else _quantity(self.limit, unit)
+        return f"{self.limit:g} %" if self.relative else with_unit(self.limit, unit)
 
     def _moved(self, before: float, now: float, worse_by: float, unit: str) -> str | None:
         """The change from ``before`` to ``now`` in words (``+47 %``, ``+7 m``) when getting
@@ -62,7 +63,7 @@ class RegressionCheck(ABC):
             return None
         if self.relative:
             return "from 0" if before == 0 else _percent(100.0 * (now - before) / abs(before))
-        return _quantity(now - before, unit, sign=True)
+        return _signed_quantity(now - before, unit)
 
 
 @dataclass(frozen=True)
@@ -102,7 +103,7 @@ class BoundaryCheck(RegressionCheck):
             return None
         if now is None:
             return (
-                f"{label} moved toward the mild side: passed {where} {_quantity(before, unit)} before, "
+                f"{label} moved toward the mild side: passed {where} {with_unit(before, unit)} before, "
                 f"now failed everywhere searched (limit {self._limit_text(unit)})"
             )
         moved = self._moved(before, now, (now - before) if current.worse == "lower" else (before - now), unit)
@@ -110,8 +111,8 @@ class BoundaryCheck(RegressionCheck):
             return None
         toward = "toward the requirement" if _at_or_beyond_edge(now, current) else "toward the mild side, past the requirement"
         return (
-            f"{label} moved {toward}: passed {where} {_quantity(before, unit)} before, now only {where} "
-            f"{_quantity(now, unit)} ({moved}, limit {self._limit_text(unit)})"
+            f"{label} moved {toward}: passed {where} {with_unit(before, unit)} before, now only {where} "
+            f"{with_unit(now, unit)} ({moved}, limit {self._limit_text(unit)})"
         )
 
 
@@ -142,16 +143,16 @@ class MetricCheck(RegressionCheck):
             return None
         before, now = _number(trial_before.metrics.get(self.metric)), _number(trial_now.metrics.get(self.metric))
         metric = METRICS[self.metric]
-        at = f"{self.metric} at the envelope's edge ({current.parameter} = {_quantity(current.edge, current.boundary.unit)})"
+        at = f"{self.metric} at the envelope's edge ({current.parameter} = {with_unit(current.edge, current.boundary.unit)})"
         if before is None:
             return None
         if now is None:
-            return f"{at} got worse: {_quantity(before, metric.unit)} before, now not available (the runs failed)"
+            return f"{at} got worse: {with_unit(before, metric.unit)} before, now not available (the runs failed)"
         moved = self._moved(before, now, (now - before) if metric.better == "lower" else (before - now), metric.unit)
         if moved is None:
             return None
         return (
-            f"{at} got worse: {_quantity(before, metric.unit)} before, now {_quantity(now, metric.unit)} "
+            f"{at} got worse: {with_unit(before, metric.unit)} before, now {with_unit(now, metric.unit)} "
             f"({moved}, limit {self._limit_text(metric.unit)})"
         )
 
@@ -254,9 +255,9 @@ def _number(value: Any) -> float | None:
     return number if math.isfinite(number) else None
 
 
-def _quantity(value: float, unit: str, *, sign: bool = False) -> str:
-    text = f"{value:+.4g}" if sign else f"{value:.4g}"
-    return f"{text} {unit}" if unit else text
+def _signed_quantity(value: float, unit: str) -> str:
+    """A change with its sign, 4 significant digits (``+3.75 m``); unsigned values use ``with_unit``."""
+    return f"{value:+.4g} {unit}" if unit else f"{value:+.4g}"
 
 
 def _percent(value: float) -> str:
