@@ -9,7 +9,8 @@ import numpy as np
 
 from pytest_sal import tracking_rate
 from pytest_sal.engine.requirements import Requirement
-from pytest_sal.engine.trial_runner import TrialRunner, aggregate_metrics, cached_sequence
+from pytest_sal.engine.run_job import cached_sequence
+from pytest_sal.engine.trial_runner import TrialRunner, aggregate_metrics
 from pytest_sal.store.trial_cache import ContentCache
 from pytest_sal.testing import FakeSlam, applied_value
 from sal_adapters import open_dataset

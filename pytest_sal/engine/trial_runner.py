@@ -14,7 +14,7 @@ version, options, the content of the files it runs), the run's number and the ru
 An identical run in a later session, or in the other xdist worker, is read back instead of
 run again; a trial that needs more runs than were cached runs only the missing ones. A stored
 run whose record lacks what the judge reads (``run_record_problem``) is discarded and run again.
-A run whose failure the machine decided (``machine_failure``: a timeout on a starved or
+A run whose failure the machine decided (``run_job.machine_failure``: a timeout on a starved or
 oversubscribed machine, out of memory) counts in this session and is not stored, so the next
 session runs it again; its run says why under ``not_cached``.
 """
@@ -24,10 +24,11 @@ from __future__ import annotations
 import functools
 import math
 import numbers
-import signal
+import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -35,15 +36,16 @@ import cv2
 import numpy as np
 
 from pytest_sal.analysis.kitti_metrics import KITTI_SEGMENTS_M
-from pytest_sal.analysis.metrics import evaluate
+from pytest_sal.engine.executor import Executor, LocalExecutor
 from pytest_sal.engine.outcome import TRIAL_METRICS, Trial, TrialMetrics
 from pytest_sal.engine.requirements import Requirement
+from pytest_sal.engine.run_job import RunJob, store_artifacts
 from pytest_sal.store.cache_keys import cache_key
 from pytest_sal.store.trial_cache import ContentCache
 from sal_adapters import Sequence
 from sal_modules import perturb
 from sal_modules.param_refs import ParamRef
-from sal_wrappers import RunResult, SlamSystem, TrackState, machine_load
+from sal_wrappers import SlamSystem
 
 __all__ = [
     "NOISY_RUNS",
@@ -51,8 +53,6 @@ __all__ = [
     "TrialRunner",
     "VotePolicy",
     "aggregate_metrics",
-    "cached_sequence",
-    "machine_failure",
     "run_record_problem",
 ]
 
@@ -99,38 +99,6 @@ def run_record_problem(record: dict[str, Any]) -> str | None:
     return None
 
 
-#: Words in a failure or log tail that say the run ran out of memory (Python, C++).
-_OUT_OF_MEMORY = ("MemoryError", "std::bad_alloc")
-
-
-def machine_failure(result: RunResult, load: dict[str, Any]) -> str | None:
-    """Why the machine, not the system, decided a failed run (it is then not cached), or ``None``.
-
-    The rule: a run that timed out (``failure`` starts with "timed out") is the machine's when
-    it fell behind the sensor clock (``RunResult.fell_behind``: starved even re-paced) or the
-    machine was busier than its cores when it started (``load``, a ``machine_load()`` taken
-    before the run: 1-minute load average above the usable cores); a timeout on a quiet machine
-    is the system's (it is too slow) and is cached. A run killed by SIGKILL without a timeout
-    (the kernel's out-of-memory killer), or whose failure or log ends in ``MemoryError`` or
-    ``std::bad_alloc``, ran out of memory: the machine's.
-    """
-    failure = result.failure
-    if failure is None:
-        return None
-    if failure.startswith("timed out"):
-        if result.fell_behind:
-            return f"timed out while starved: it fell behind the sensor clock ({result.load.get('fell_behind_reason')})"
-        cores = int(load.get("usable_cpus") or load["cpus"])
-        if float(load["loadavg"][0]) > cores:
-            return f"timed out on a busy machine: load average {float(load['loadavg'][0]):.1f} on {cores} cores when it started"
-        return None
-    if result.exit_status == -signal.SIGKILL:
-        return "killed by SIGKILL without a timeout: the out-of-memory killer, most likely"
-    if any(word in failure or word in result.log_tail for word in _OUT_OF_MEMORY):
-        return "ran out of memory"
-    return None
-
-
 @dataclass(frozen=True)
 class VotePolicy:
     """How many runs decide a trial of a noisy system.
@@ -166,6 +134,14 @@ class VotePolicy:
         short = abs(passes - fails) < lead if self.noisy else passes + fails == 0
         return short and passes + fails + abstained < cap
 
+    def needed(self, passes: int, fails: int, confirming: bool = False, abstained: int = 0) -> int:
+        """The fewest more runs after which the vote could be settled (at least 1 while
+        ``more``): running that many at once gives the verdict the runs one by one would, since
+        each run moves the lead by at most one."""
+        lead, cap = (self.confirm_lead, self.confirm_runs or self.max_runs + 2) if confirming else (self.lead, self.max_runs)
+        short = lead - abs(passes - fails) if self.noisy else 1
+        return max(1, min(short, cap - passes - fails - abstained))
+
 
 #: Most runs per trial of a noisy system when ``sal_runs`` is not set.
 NOISY_RUNS = 5
@@ -192,8 +168,11 @@ class TrialRunner:
             layout, and give systems the copy read back from there: the same severity is then
             perturbed once for every system and session (worth it for several systems or an
             external ``command`` system; writing costs about 25-45 ms a frame).
-        progress: called with the trial after each evaluation and confirmation.
+        progress: called with the trial after each evaluation and confirmation (from one
+            thread at a time).
         kitti_segments: segment lengths (m) of ``t_rel`` / ``r_rel`` (ini ``sal_kitti_segments``).
+        executor: where runs that are not cached happen (``LocalExecutor``: here, one at a
+            time); runs of one vote go to it together, up to ``executor.slots(system)``.
     """
 
     dataset: Sequence
@@ -209,9 +188,11 @@ class TrialRunner:
     cache_frames: bool = False
     progress: Callable[[Trial], None] | None = None
     kitti_segments: tuple[float, ...] = KITTI_SEGMENTS_M
+    executor: Executor = field(default_factory=LocalExecutor)
 
     def __post_init__(self) -> None:
         self.policy = VotePolicy.for_system(self.system, self.runs)
+        self._progress_lock = threading.Lock()
 
     def key(self, value: float, number: int = 0) -> str:
         """Cache key of run ``number`` at ``value``."""
@@ -266,21 +247,23 @@ class TrialRunner:
         start = time.perf_counter()
         added = False
         while not trial.runs or self.policy.more(trial.passes, trial.fails, confirming, abstained=trial.abstained):
-            number = len(trial.runs)
-            key = self.key(trial.value, number)
-            if self.cache is None:
-                data, cached = self._run(trial.value, key, number), False
+            batch = min(
+                self.policy.needed(trial.passes, trial.fails, confirming, trial.abstained), max(1, self.executor.slots(self.system))
+            )
+            numbers = range(len(trial.runs), len(trial.runs) + batch)
+            if batch == 1:
+                results = [self._cached_run(trial.value, numbers[0])]
             else:
-                data, cached = self.cache.compute(
-                    key, functools.partial(self._run, trial.value, key, number), check=run_record_problem, transient=_not_cached
-                )
-            passed = self.requirement.holds(data["metrics"])
-            # a run the machine starved is no evidence that the system failed: it gets no vote
-            run = dict(data["metrics"], passed=passed, abstained=bool(data["metrics"].get("starved")) and not passed, cached=cached)
-            if reason := _not_cached(data):
-                run["not_cached"] = reason
-            trial.runs.append(run)
-            trial.artifacts.update({k: v for k, v in data.get("artifacts", {}).items() if k not in trial.artifacts})
+                with ThreadPoolExecutor(max_workers=batch, thread_name_prefix="sal-run") as pool:
+                    results = list(pool.map(functools.partial(self._cached_run, trial.value), numbers))
+            for data, cached in results:
+                passed = self.requirement.holds(data["metrics"])
+                # a run the machine starved is no evidence that the system failed: it gets no vote
+                run = dict(data["metrics"], passed=passed, abstained=bool(data["metrics"].get("starved")) and not passed, cached=cached)
+                if reason := _not_cached(data):
+                    run["not_cached"] = reason
+                trial.runs.append(run)
+                trial.artifacts.update({k: v for k, v in data.get("artifacts", {}).items() if k not in trial.artifacts})
             added = True
         if not added:
             return
@@ -290,67 +273,37 @@ class TrialRunner:
         trial.failed = [str(c) for c in self.requirement.failed(trial.metrics)]
         trial.wall_time_s += time.perf_counter() - start
         if self.progress is not None:
-            self.progress(trial)
+            with self._progress_lock:
+                self.progress(trial)
 
-    def _run(self, value: float, key: str, number: int) -> dict[str, Any]:
-        """One run at ``value``: perturb, run the system, score; the first run of a trial also
-        makes the report artifacts."""
-        module = self.ref.module(value)
-        perturbed = perturb(self.dataset, module, seed=self.seed)
-        if self.cache_frames and self.cache is not None:
-            perturbed = cached_sequence(perturbed, self.cache)
-        groundtruth = perturbed.groundtruth
-        folder = self.cache.root / "artifacts" if self.cache is not None and self.artifacts and number == 0 else None
-        load = machine_load()
-        try:
-            result = self.system.run(perturbed, self.workdir / f"{key[:12]}-run{number}", timeout=self.timeout)
-        except MemoryError:
-            states = np.full(len(perturbed), TrackState.NOT_INITIALISED, dtype=np.int8)
-            result = RunResult(
-                system=self.system.name,
-                sequence=perturbed.name,
-                sensor=perturbed.sensor,
-                timestamps=perturbed.timestamps,
-                states=states,
-                failure="out of memory (MemoryError)",
-            )
-        scored = evaluate(result, groundtruth, kitti_segments=self.kitti_segments)
-        metrics = scored.to_dict()
-        for name in TRIAL_METRICS:  # NaN judges like null, and a stored record holds no NaN
-            if metrics[name] is not None and not math.isfinite(metrics[name]):
-                metrics[name] = None
-        metrics["wall_time_s"] = result.wall_time_s
-        metrics["starved"] = result.fell_behind  # the machine could not feed it even re-paced
-        metrics["load"] = result.load
-        artifacts: dict[str, str] = {}
-        if folder is not None:
-            if scored.ate is not None and groundtruth is not None:
-                from pytest_sal.analysis.plots import plot_trajectories
+    def _cached_run(self, value: float, number: int) -> tuple[dict[str, Any], bool]:
+        """``(record, was_cached)`` of run ``number`` at ``value``: read from the cache, or run by
+        the executor and stored (unless the machine decided its failure)."""
+        key = self.key(value, number)
+        if self.cache is None:
+            return self._execute(value, key, number), False
+        compute = functools.partial(self._execute, value, key, number)
+        return self.cache.compute(key, compute, check=run_record_problem, transient=_not_cached)
 
-                title = f"{self.system.name} on {perturbed.name}, {self.ref.label} = {value:g} {self.ref.unit}".rstrip()
-                artifacts["trajectory"] = str(
-                    plot_trajectories(groundtruth, {self.system.name: scored.ate.estimate}, folder / f"{key}-trajectory.png", title=title)
-                )
-            if len(perturbed):
-                artifacts["frame"] = str(_example_frame(perturbed, folder / f"{key}.png"))
-        record = {"value": value, "module": module.to_dict(), "metrics": metrics, "artifacts": artifacts}
-        reason = machine_failure(result, load)
-        return record if reason is None else {**record, "not_cached": reason}
-
-
-def cached_sequence(sequence: Sequence, cache: ContentCache, *, progress: bool = False) -> Sequence:
-    """``sequence`` written once into ``cache`` (keyed by its fingerprint, which for a
-    perturbed sequence covers source, chain, seed and depth provider) and opened from there;
-    ``progress`` shows a bar while it is written."""
-    from sal_adapters import DATASETS, open_dataset, write_sequence
-
-    def fill(target: Path) -> None:
-        write_sequence(sequence, target, progress=progress)
-
-    folder, _ = cache.compute_dir(cache_key(frames=sequence.fingerprint), fill)
-    options = {"stereo": True} if sequence.sensor == "stereo" and "stereo" in DATASETS.get(sequence.kind).option_names() else {}
-    reopened = open_dataset(sequence.kind, folder, **options)
-    return reopened.replace(name=sequence.name, meta=dict(reopened.meta, perturbation=sequence.meta.get("perturbation")))
+    def _execute(self, value: float, key: str, number: int) -> dict[str, Any]:
+        """Run ``number`` at ``value`` on the executor; its report images (first run of a trial)
+        are written here, on the controller, under the cache's ``artifacts`` folder."""
+        job = RunJob(
+            key=key,
+            number=number,
+            value=value,
+            dataset=self.dataset,
+            ref=self.ref,
+            system=self.system,
+            seed=self.seed,
+            workdir=self.workdir,
+            timeout=self.timeout,
+            kitti_segments=self.kitti_segments,
+            artifacts=self.artifacts and self.cache is not None and number == 0,
+            frames_cache=self.cache.root if self.cache_frames and self.cache is not None else None,
+        )
+        folder = self.cache.root / "artifacts" if job.artifacts and self.cache is not None else None
+        return store_artifacts(self.executor.run(job), folder, key)
 
 
 def _not_cached(record: dict[str, Any]) -> str | None:
@@ -366,12 +319,3 @@ def _same(a: np.ndarray | None, b: np.ndarray | None) -> bool:
         return False
     change = cv2.absdiff(a, b)
     return int(change.max(initial=0)) <= 1 and bool(np.count_nonzero(change) < 0.01 * change.size)
-
-
-def _example_frame(sequence: Sequence, path: Path, width: int = 480) -> Path:
-    """The middle frame of ``sequence``, scaled to ``width`` px, as a PNG (for reports)."""
-    from sal_adapters.images import scaled_to_width, write_image
-
-    path.parent.mkdir(parents=True, exist_ok=True)
-    write_image(path, scaled_to_width(sequence[len(sequence) // 2].image, width))
-    return path

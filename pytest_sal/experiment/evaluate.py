@@ -90,7 +90,7 @@ def evaluate_experiment(
     seconds per run. ``on_run`` is called with each run as it is scored, ``warn`` with each
     warning (no ground truth, a plot that failed). Returns the summary (also in
     ``metrics/summary.json``) with ``root``, the results folder, added."""
-    from pytest_sal.engine.trial_runner import cached_sequence
+    from pytest_sal.engine.run_job import cached_sequence
     from pytest_sal.store.trial_cache import command_cache
 
     clean = build_sequence(config)

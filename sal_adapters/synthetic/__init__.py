@@ -15,7 +15,6 @@ motion, ``cache`` renders lazily, ``layout`` reads and writes the folder layout.
 from __future__ import annotations
 
 from collections.abc import Iterable
-from functools import lru_cache
 from numbers import Integral
 from pathlib import Path
 from typing import Any
@@ -31,7 +30,7 @@ from sal_adapters.synthetic.cache import (
 from sal_adapters.synthetic.indoor import IndoorWorld
 from sal_adapters.synthetic.layout import read_layout, read_metadata, write_layout
 from sal_adapters.synthetic.urban import UrbanWorld
-from sal_adapters.synthetic.world import World
+from sal_adapters.synthetic.world import World, shared_world
 
 __all__ = ["RENDERER_VERSION", "SYNTHETIC", "WORLDS", "SyntheticDataset", "make_world"]
 
@@ -39,10 +38,9 @@ __all__ = ["RENDERER_VERSION", "SYNTHETIC", "WORLDS", "SyntheticDataset", "make_
 WORLDS: dict[str, type[World]] = {"urban": UrbanWorld, "indoor": IndoorWorld}
 
 
-@lru_cache(maxsize=4)
 def make_world(scene: str, seed: int) -> World:
     """The world of ``scene`` and ``seed`` (shared, so its texture atlas is painted once)."""
-    return WORLDS[scene](seed)
+    return shared_world(WORLDS[scene], seed)
 
 
 class SyntheticDataset(DatasetKind):

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from functools import cached_property
-from typing import ClassVar
+from functools import cached_property, lru_cache
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -13,7 +13,7 @@ from sal_adapters.synthetic.atlas import Atlas, build_atlas
 from sal_adapters.synthetic.render import Renderer, Stage
 from sal_adapters.trajectory import Trajectory
 
-__all__ = ["World", "rotation", "wave"]
+__all__ = ["World", "rotation", "shared_world", "wave"]
 
 
 def rotation(yaw: float, pitch: float, roll: float) -> np.ndarray:
@@ -53,6 +53,11 @@ class World(ABC):
     def __init__(self, seed: int):
         self.seed = int(seed)
         self.tiles = {name: number for number, name in enumerate(self.TILE_NAMES)}
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        """Pickled as its class and seed (a world follows from them), so a sequence of it can
+        travel to another process (a Ray worker), which builds the world once and shares it."""
+        return shared_world, (type(self), self.seed)
 
     @abstractmethod
     def pose(self, t: float) -> np.ndarray:
@@ -105,3 +110,10 @@ class World(ABC):
         origin = np.linalg.inv(self.pose(0.0))
         poses = np.stack([origin @ self.pose(t) for t in times]) if len(times) else np.zeros((0, 4, 4))
         return Trajectory.from_matrices(times, poses)
+
+
+@lru_cache(maxsize=4)
+def shared_world(world_class: type[World], seed: int) -> World:
+    """The world of ``world_class`` and ``seed``, built once per process (its texture atlas is
+    painted once)."""
+    return world_class(seed)

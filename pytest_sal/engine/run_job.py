@@ -1,0 +1,220 @@
+"""One run of a trial as a self-contained job: what an executor sends to wherever the run
+happens (this process, or a Ray worker on another machine), and what comes back.
+
+``RunJob`` holds everything the run needs and nothing of the session: the clean sequence
+(pickled as its frame sources: image paths, or the synthetic world's class and seed), the
+searched parameter and value, the seed, the system, the timeout. ``run_job`` perturbs the
+sequence where it runs, runs the system (which keeps its own crash isolation: a segfault or a
+timeout is a failed run, never an exception) and scores the trajectory with evo. It returns a
+``RunOutput``: the run record the cache stores, the estimated trajectory, and the report
+images as PNG bytes. The controller writes those (``store_artifacts``) and the cache entry, so
+nothing a remote worker wrote on its own disk is needed afterwards.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import socket
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from pytest_sal.analysis.metrics import evaluate
+from pytest_sal.engine.outcome import TRIAL_METRICS
+from pytest_sal.store.trial_cache import ContentCache
+from sal_adapters import Sequence
+from sal_modules import perturb
+from sal_modules.param_refs import ParamRef
+from sal_wrappers import RunResult, SlamSystem, TrackState, machine_load
+
+__all__ = ["RunJob", "RunOutput", "cached_sequence", "machine_failure", "run_job", "store_artifacts", "worker_name"]
+
+
+@dataclass(frozen=True)
+class RunJob:
+    """One run: the system on the dataset perturbed at ``value``.
+
+    Attributes:
+        key: the run's cache key (names its work folder and its artefacts).
+        number: the run's number within its trial (0 for the first).
+        value: the severity, in the unit of ``ref``.
+        dataset: the clean sequence.
+        ref: the searched parameter (``fog.visibility_m``).
+        system: the SLAM system.
+        seed: the perturbation seed.
+        workdir: the folder under which the run writes its logs and files.
+        timeout: seconds the system may run (``None``: no limit).
+        kitti_segments: segment lengths (m) of ``t_rel`` / ``r_rel``.
+        artifacts: make the report images (an example frame, a trajectory plot).
+        frames_cache: write the perturbed sequence once into this cache folder and run the
+            system on the copy read back (``--sal-cache-frames``), or ``None``.
+    """
+
+    key: str
+    number: int
+    value: float
+    dataset: Sequence
+    ref: ParamRef
+    system: SlamSystem
+    seed: int
+    workdir: Path
+    timeout: float | None
+    kitti_segments: tuple[float, ...]
+    artifacts: bool = False
+    frames_cache: Path | None = None
+
+
+@dataclass
+class RunOutput:
+    """What a run gives back.
+
+    Attributes:
+        record: the run record the cache stores: ``value``, ``module``, ``metrics`` and, when
+            the machine decided a failure, ``not_cached`` (why it must not be stored).
+        trajectory: the estimated trajectory as TUM rows ``t x y z qx qy qz qw``, or ``None``.
+        images: report images by name (``frame``, ``trajectory``), PNG bytes.
+        worker: where it ran (``host:pid``).
+    """
+
+    record: dict[str, Any]
+    trajectory: list[list[float]] | None = None
+    images: dict[str, bytes] = field(default_factory=dict)
+    worker: str = ""
+
+
+def worker_name() -> str:
+    """``host:pid`` of this process: where a run ran, in messages."""
+    return f"{socket.gethostname()}:{os.getpid()}"
+
+
+def run_job(job: RunJob) -> RunOutput:
+    """Perturb, run, score: one run of ``job`` in this process (the system may start its own child)."""
+    module = job.ref.module(job.value)
+    perturbed = perturb(job.dataset, module, seed=job.seed)
+    if job.frames_cache is not None:
+        perturbed = cached_sequence(perturbed, ContentCache(job.frames_cache))
+    groundtruth = perturbed.groundtruth
+    load = machine_load()
+    try:
+        result = job.system.run(perturbed, job.workdir / f"{job.key[:12]}-run{job.number}", timeout=job.timeout)
+    except MemoryError:
+        states = np.full(len(perturbed), TrackState.NOT_INITIALISED, dtype=np.int8)
+        result = RunResult(
+            system=job.system.name,
+            sequence=perturbed.name,
+            sensor=perturbed.sensor,
+            timestamps=perturbed.timestamps,
+            states=states,
+            failure="out of memory (MemoryError)",
+        )
+    scored = evaluate(result, groundtruth, kitti_segments=job.kitti_segments)
+    metrics = scored.to_dict()
+    for name in TRIAL_METRICS:  # NaN judges like null, and a stored record holds no NaN
+        if metrics[name] is not None and not math.isfinite(metrics[name]):
+            metrics[name] = None
+    metrics["wall_time_s"] = result.wall_time_s
+    metrics["starved"] = result.fell_behind  # the machine could not feed it even re-paced
+    metrics["load"] = result.load
+    images: dict[str, bytes] = {}
+    if job.artifacts:
+        if scored.ate is not None and groundtruth is not None:
+            images["trajectory"] = _trajectory_png(job, perturbed.name, groundtruth, scored.ate.estimate)
+        if len(perturbed):
+            images["frame"] = _example_frame_png(perturbed)
+    record: dict[str, Any] = {"value": job.value, "module": module.to_dict(), "metrics": metrics}
+    if (reason := machine_failure(result, load)) is not None:
+        record["not_cached"] = reason
+    trajectory = result.to_dict()["trajectory"]
+    return RunOutput(record=record, trajectory=trajectory, images=images, worker=worker_name())
+
+
+def store_artifacts(output: RunOutput, folder: Path | None, key: str) -> dict[str, Any]:
+    """The run record of ``output`` with its report images written under ``folder`` as
+    ``<key>.png`` (the frame) and ``<key>-trajectory.png``, named in ``artifacts`` (none when
+    ``folder`` is ``None``)."""
+    artifacts: dict[str, str] = {}
+    if folder is not None:
+        folder.mkdir(parents=True, exist_ok=True)
+        for name, data in sorted(output.images.items()):
+            path = folder / (f"{key}.png" if name == "frame" else f"{key}-{name}.png")
+            path.write_bytes(data)
+            artifacts[name] = str(path)
+    return {**output.record, "artifacts": artifacts}
+
+
+#: Words in a failure or log tail that say the run ran out of memory (Python, C++).
+_OUT_OF_MEMORY = ("MemoryError", "std::bad_alloc")
+
+
+def machine_failure(result: RunResult, load: dict[str, Any]) -> str | None:
+    """Why the machine, not the system, decided a failed run (it is then not cached), or ``None``.
+
+    The rule: a run that timed out (``failure`` starts with "timed out") is the machine's when
+    it fell behind the sensor clock (``RunResult.fell_behind``: starved even re-paced) or the
+    machine was busier than its cores when it started (``load``, a ``machine_load()`` taken
+    before the run: 1-minute load average above the usable cores); a timeout on a quiet machine
+    is the system's (it is too slow) and is cached. A run killed by SIGKILL without a timeout
+    (the kernel's out-of-memory killer), or whose failure or log ends in ``MemoryError`` or
+    ``std::bad_alloc``, ran out of memory: the machine's.
+    """
+    failure = result.failure
+    if failure is None:
+        return None
+    if failure.startswith("timed out"):
+        if result.fell_behind:
+            return f"timed out while starved: it fell behind the sensor clock ({result.load.get('fell_behind_reason')})"
+        cores = int(load.get("usable_cpus") or load["cpus"])
+        if float(load["loadavg"][0]) > cores:
+            return f"timed out on a busy machine: load average {float(load['loadavg'][0]):.1f} on {cores} cores when it started"
+        return None
+    if result.exit_status == -signal.SIGKILL:
+        return "killed by SIGKILL without a timeout: the out-of-memory killer, most likely"
+    if any(word in failure or word in result.log_tail for word in _OUT_OF_MEMORY):
+        return "ran out of memory"
+    return None
+
+
+def cached_sequence(sequence: Sequence, cache: ContentCache, *, progress: bool = False) -> Sequence:
+    """``sequence`` written once into ``cache`` (keyed by its fingerprint, which for a
+    perturbed sequence covers source, chain, seed and depth provider) and opened from there;
+    ``progress`` shows a bar while it is written."""
+    from pytest_sal.store.cache_keys import cache_key
+    from sal_adapters import DATASETS, open_dataset, write_sequence
+
+    def fill(target: Path) -> None:
+        write_sequence(sequence, target, progress=progress)
+
+    folder, _ = cache.compute_dir(cache_key(frames=sequence.fingerprint), fill)
+    options = {"stereo": True} if sequence.sensor == "stereo" and "stereo" in DATASETS.get(sequence.kind).option_names() else {}
+    reopened = open_dataset(sequence.kind, folder, **options)
+    return reopened.replace(name=sequence.name, meta=dict(reopened.meta, perturbation=sequence.meta.get("perturbation")))
+
+
+def _trajectory_png(job: RunJob, sequence_name: str, groundtruth: Any, estimate: Any) -> bytes:
+    """The estimated trajectory over the ground truth, as PNG bytes."""
+    import tempfile
+
+    from pytest_sal.analysis.plots import plot_trajectories
+
+    title = f"{job.system.name} on {sequence_name}, {job.ref.label} = {job.value:g} {job.ref.unit}".rstrip()
+    with tempfile.TemporaryDirectory(prefix="sal-plot-") as tmp:
+        path = plot_trajectories(groundtruth, {job.system.name: estimate}, Path(tmp) / "trajectory.png", title=title)
+        return Path(path).read_bytes()
+
+
+def _example_frame_png(sequence: Sequence, width: int = 480) -> bytes:
+    """The middle frame of ``sequence``, scaled to ``width`` px, as PNG bytes (for reports)."""
+    from sal_adapters.images import scaled_to_width
+
+    image = scaled_to_width(sequence[len(sequence) // 2].image, width)
+    if image.ndim == 3:
+        image = cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
+    ok, data = cv2.imencode(".png", image)
+    if not ok:
+        raise ValueError(f"could not encode the example frame of {sequence.name} as PNG")
+    return data.tobytes()
