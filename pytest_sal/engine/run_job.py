@@ -3,11 +3,11 @@ happens (this process, or a Ray worker on another machine), and what comes back.
 
 ``RunJob`` holds everything the run needs and nothing of the session: the clean sequence
 (pickled as its frame sources: image paths, or the synthetic world's class and seed), the
-searched parameter and value, the seed, the system, the timeout. ``run_job`` perturbs the
+perturbation configured at the trial's severity, the seed, the system, the timeout. ``run_job`` perturbs the
 sequence where it runs, runs the system (which keeps its own crash isolation: a segfault or a
 timeout is a failed run, never an exception) and scores the trajectory with evo. It returns a
-``RunOutput``: the run record the cache stores, the estimated trajectory, and the report
-images as PNG bytes. The controller writes those (``store_artifacts``) and the cache entry, so
+``RunOutput``: the run record the cache stores, the whole ``RunResult`` (states, trajectory,
+log tail), and the report images as PNG bytes. The controller writes those (``store_artifacts``) and the cache entry, so
 nothing a remote worker wrote on its own disk is needed afterwards.
 """
 
@@ -28,8 +28,7 @@ from pytest_sal.analysis.metrics import evaluate
 from pytest_sal.engine.outcome import TRIAL_METRICS
 from pytest_sal.store.trial_cache import ContentCache
 from sal_adapters import Sequence
-from sal_modules import perturb
-from sal_modules.param_refs import ParamRef
+from sal_modules import Perturbation, perturb
 from sal_wrappers import RunResult, SlamSystem, TrackState, machine_load
 
 __all__ = ["RunJob", "RunOutput", "cached_sequence", "machine_failure", "run_job", "store_artifacts", "worker_name"]
@@ -37,14 +36,15 @@ __all__ = ["RunJob", "RunOutput", "cached_sequence", "machine_failure", "run_job
 
 @dataclass(frozen=True)
 class RunJob:
-    """One run: the system on the dataset perturbed at ``value``.
+    """One run: the system on the dataset perturbed by ``module``.
 
     Attributes:
         key: the run's cache key (names its work folder and its artefacts).
         number: the run's number within its trial (0 for the first).
-        value: the severity, in the unit of ``ref``.
+        value: the severity, in the searched parameter's unit (recorded with the run).
+        label: what ``value`` is, for the plot title: ``fog.visibility_m = 30 m``.
         dataset: the clean sequence.
-        ref: the searched parameter (``fog.visibility_m``).
+        module: the perturbation (a module or a chain) configured at ``value``.
         system: the SLAM system.
         seed: the perturbation seed.
         workdir: the folder under which the run writes its logs and files.
@@ -58,8 +58,9 @@ class RunJob:
     key: str
     number: int
     value: float
+    label: str
     dataset: Sequence
-    ref: ParamRef
+    module: Perturbation
     system: SlamSystem
     seed: int
     workdir: Path
@@ -76,13 +77,13 @@ class RunOutput:
     Attributes:
         record: the run record the cache stores: ``value``, ``module``, ``metrics`` and, when
             the machine decided a failure, ``not_cached`` (why it must not be stored).
-        trajectory: the estimated trajectory as TUM rows ``t x y z qx qy qz qw``, or ``None``.
+        result: the system's ``RunResult.to_dict()`` (states, trajectory, failure, log tail).
         images: report images by name (``frame``, ``trajectory``), PNG bytes.
         worker: where it ran (``host:pid``).
     """
 
     record: dict[str, Any]
-    trajectory: list[list[float]] | None = None
+    result: dict[str, Any] = field(default_factory=dict)
     images: dict[str, bytes] = field(default_factory=dict)
     worker: str = ""
 
@@ -94,8 +95,7 @@ def worker_name() -> str:
 
 def run_job(job: RunJob) -> RunOutput:
     """Perturb, run, score: one run of ``job`` in this process (the system may start its own child)."""
-    module = job.ref.module(job.value)
-    perturbed = perturb(job.dataset, module, seed=job.seed)
+    perturbed = perturb(job.dataset, job.module, seed=job.seed)
     if job.frames_cache is not None:
         perturbed = cached_sequence(perturbed, ContentCache(job.frames_cache))
     groundtruth = perturbed.groundtruth
@@ -126,11 +126,10 @@ def run_job(job: RunJob) -> RunOutput:
             images["trajectory"] = _trajectory_png(job, perturbed.name, groundtruth, scored.ate.estimate)
         if len(perturbed):
             images["frame"] = _example_frame_png(perturbed)
-    record: dict[str, Any] = {"value": job.value, "module": module.to_dict(), "metrics": metrics}
+    record: dict[str, Any] = {"value": job.value, "module": job.module.to_dict(), "metrics": metrics}
     if (reason := machine_failure(result, load)) is not None:
         record["not_cached"] = reason
-    trajectory = result.to_dict()["trajectory"]
-    return RunOutput(record=record, trajectory=trajectory, images=images, worker=worker_name())
+    return RunOutput(record=record, result=result.to_dict(), images=images, worker=worker_name())
 
 
 def store_artifacts(output: RunOutput, folder: Path | None, key: str) -> dict[str, Any]:
@@ -201,7 +200,7 @@ def _trajectory_png(job: RunJob, sequence_name: str, groundtruth: Any, estimate:
 
     from pytest_sal.analysis.plots import plot_trajectories
 
-    title = f"{job.system.name} on {sequence_name}, {job.ref.label} = {job.value:g} {job.ref.unit}".rstrip()
+    title = f"{job.system.name} on {sequence_name}, {job.label}"
     with tempfile.TemporaryDirectory(prefix="sal-plot-") as tmp:
         path = plot_trajectories(groundtruth, {job.system.name: estimate}, Path(tmp) / "trajectory.png", title=title)
         return Path(path).read_bytes()
