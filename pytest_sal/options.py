@@ -141,6 +141,26 @@ OPTIONS: tuple[tuple[str, dict[str, Any]], ...] = (
         ),
     ),
     (
+        "--sal-executor",
+        dict(
+            dest="sal_executor",
+            choices=("local", "ray"),
+            default=None,
+            help="where SLAM runs happen: local (this process, one at a time) or ray (Ray tasks on a cluster, several "
+            "at once; needs pytest-sal[ray]; ini sal_executor). Default: local",
+        ),
+    ),
+    (
+        "--sal-ray-address",
+        dict(
+            dest="sal_ray_address",
+            metavar="ADDRESS",
+            default=None,
+            help="the Ray cluster of --sal-executor ray: auto (the one on this machine), ray://HOST:10001 (Ray client), "
+            "HOST:PORT (its GCS), or empty: a local Ray started for the session (ini sal_ray_address). Default: empty",
+        ),
+    ),
+    (
         "--sal-report-md",
         dict(dest="sal_report_md", metavar="FILE", default=None, help="write a Markdown summary (for a CI job summary) to FILE"),
     ),
@@ -169,6 +189,8 @@ INI_KEYS: tuple[tuple[str, str, str | None], ...] = (
     ("sal_seed", "perturbation seed (default 0)", "0"),
     ("sal_timeout", "seconds per SLAM run before it is killed (default 600)", "600"),
     ("sal_system", "default system: orbslam3 when installed, else reference_vo", None),
+    ("sal_executor", "where SLAM runs happen: local or ray (default local)", "local"),
+    ("sal_ray_address", "Ray cluster of the ray executor: auto, ray://HOST:10001, HOST:PORT or empty for a local Ray (default empty)", ""),
     (
         "sal_kitti_segments",
         "segment lengths (m) of the KITTI metrics t_rel / r_rel, e.g. 10,20,30,40 for a short sequence "
@@ -214,6 +236,9 @@ class SalOptions:
         kitti_segments: segment lengths (m) of ``t_rel`` / ``r_rel``.
         search: the default tolerance and trial budget of a boundary search.
         report_md, report_html: where the Markdown and HTML reports go (``None``: not written).
+        executor, ray_address: where runs happen (``local`` or ``ray``) and the Ray cluster
+            (``""``: a local Ray started for the session; an xdist worker gets the one its
+            controller started).
     """
 
     cache_dir: Path
@@ -234,6 +259,8 @@ class SalOptions:
     search: SearchSettings
     report_md: Path | None
     report_html: Path | None
+    executor: str = "local"
+    ray_address: str = ""
 
 
 def read_options(config: pytest.Config) -> SalOptions:
@@ -268,6 +295,8 @@ def read_options(config: pytest.Config) -> SalOptions:
         search=SearchSettings(tolerance_pct=_ini_number(config, "sal_tolerance"), max_trials=int(_ini_number(config, "sal_max_trials"))),
         report_md=Path(option.sal_report_md) if option.sal_report_md else None,
         report_html=Path(option.sal_report_html) if option.sal_report_html else None,
+        executor=_executor(config),
+        ray_address=_ray_address(config),
     )
     _check_outputs(options)
     _check_system(options.system_name)
@@ -289,6 +318,39 @@ def _compare_missing(config: pytest.Config) -> str:
     if policy not in MISSING_POLICIES:
         raise pytest.UsageError(f"pytest-sal: ini option sal_compare_missing = {policy!r}: expected pass or fail")
     return str(policy)
+
+
+def _executor(config: pytest.Config) -> str:
+    """``--sal-executor``, else ini ``sal_executor``: ``local`` or ``ray`` (a usage error when
+    Ray is asked for and not installed)."""
+    import importlib.util
+
+    name = config.option.sal_executor or str(config.getini("sal_executor")).strip() or "local"
+    if name not in ("local", "ray"):
+        raise pytest.UsageError(f"pytest-sal: ini option sal_executor = {name!r}: expected local or ray")
+    if name == "ray" and importlib.util.find_spec("ray") is None:
+        raise pytest.UsageError("pytest-sal: --sal-executor ray needs Ray, which is not installed: pip install 'pytest-sal[ray]'")
+    return name
+
+
+def _ray_address(config: pytest.Config) -> str:
+    """The Ray cluster's address: the one the xdist controller started (a worker), else
+    ``--sal-ray-address``, else ini ``sal_ray_address``; checked for its form."""
+    workerinput = getattr(config, "workerinput", {})
+    if workerinput.get("sal_ray_address"):
+        return str(workerinput["sal_ray_address"])
+    given = config.option.sal_ray_address
+    text = (given if given is not None else str(config.getini("sal_ray_address"))).strip()
+    if text and text != "auto" and not _address_form(text):
+        where = "--sal-ray-address" if given is not None else "ini option sal_ray_address"
+        raise pytest.UsageError(f"pytest-sal: {where} = {text!r}: expected auto, ray://HOST:PORT, HOST:PORT or nothing (a local Ray)")
+    return text
+
+
+def _address_form(text: str) -> bool:
+    """``HOST:PORT`` or ``ray://HOST:PORT`` with a port number."""
+    host, _, port = text.removeprefix("ray://").rpartition(":")
+    return bool(host) and port.isdigit() and 0 < int(port) < 65536
 
 
 def _ini_number(config: pytest.Config, name: str) -> float:

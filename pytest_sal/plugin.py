@@ -40,6 +40,7 @@ __all__ = [
     "pytest_runtest_setup",
     "pytest_sessionfinish",
     "pytest_terminal_summary",
+    "pytest_unconfigure",
     "sal_dataset",
     "sal_level",
     "sal_outcome",
@@ -75,12 +76,14 @@ def pytest_configure(config: pytest.Config) -> None:
 
 
 def pytest_report_header(config: pytest.Config) -> list[str]:
-    """Say at the start when the robustness tests' ORB-SLAM3 runs will not all get the cores
-    they need (more xdist workers than cores, or a machine already busy): such runs fall
-    behind the sensor clock; they are re-paced and marked, and take longer."""
+    """Say at the start where runs happen when not here (``--sal-executor ray``), and when the
+    robustness tests' local ORB-SLAM3 runs will not all get the cores they need (more xdist
+    workers than cores, or a machine already busy): such runs fall behind the sensor clock;
+    they are re-paced and marked, and take longer."""
     session: SalSession = config.stash[SAL_SESSION]
-    if session.default_system_name() != "orbslam3":
-        return []
+    lines = [f"pytest-sal: runs on {session.executor.describe()}"] if session.options.executor != "local" else []
+    if session.default_system_name() != "orbslam3" or session.options.executor != "local":
+        return lines
     from sal_wrappers import oversubscribed_warning
 
     workers = getattr(config.option, "numprocesses", None)
@@ -298,6 +301,13 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     if hasattr(session.config, "workerinput"):
         return
     session.config.stash[SAL_SESSION].finish()
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    """Release the executor: a local Ray this process started is shut down."""
+    session = config.stash.get(SAL_SESSION, None)
+    if session is not None:
+        session.close()
 
 
 def _trace(outcome: Outcome) -> str:

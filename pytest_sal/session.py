@@ -13,6 +13,7 @@ from pytest_sal.options import read_options
 from pytest_sal.session_results import SessionResults
 
 if TYPE_CHECKING:
+    from pytest_sal.engine.executor import Executor
     from pytest_sal.history.run_history import History
     from pytest_sal.store.trial_cache import ContentCache
 
@@ -37,6 +38,7 @@ class SalSession:
         self._machine: str | None = None
         self._cache: ContentCache | None = None
         self._history: History | None = None
+        self._executor: Executor | None = None
         self._datasets: dict[str, Any] = {}
 
     @property
@@ -53,6 +55,30 @@ class SalSession:
 
             self._cache = ContentCache(self.options.cache_dir, self.options.cache_size)
         return self._cache
+
+    @property
+    def executor(self) -> Executor:
+        """Where runs happen (``--sal-executor``), made when first needed; a local Ray starts
+        on its first run, not here."""
+        if self._executor is None:
+            from pytest_sal.engine.executor import make_executor
+
+            self._executor = make_executor(self.options.executor, self.options.ray_address)
+        return self._executor
+
+    @pytest.hookimpl(optionalhook=True)
+    def pytest_configure_node(self, node: Any) -> None:
+        """pytest-xdist (controller): every worker submits to one Ray cluster. A local Ray is
+        started here once and its address handed to the workers, so ``-n N`` lets N tests
+        submit at once without N clusters."""
+        if self.options.executor == "ray" and not self.options.ray_address:
+            self.executor.connect()  # type: ignore[attr-defined]
+            node.workerinput["sal_ray_address"] = self.executor.address  # type: ignore[attr-defined]
+
+    def close(self) -> None:
+        """Release the executor (shut down a local Ray this process started)."""
+        if self._executor is not None:
+            self._executor.close()
 
     @property
     def history(self) -> History:
@@ -111,6 +137,7 @@ class SalSession:
             cache_frames=self.options.cache_frames,
             kitti_segments=self.options.kitti_segments,
             progress=trial_printer(self.config, item.nodeid, ref.label, ref.unit, metrics),
+            executor=self.executor,
         )
 
     def search(self, item: pytest.Item, dataset: Any, system: Any, runs: int | None, workdir: Path) -> Any:

@@ -112,6 +112,9 @@ BAD_INI = [
     ("sal_cache_size", "lots", "invalid size 'lots': expected bytes with an optional unit*"),
     ("sal_kitti_segments", "10,x", "expected lengths > 0 (m) separated by commas, e.g. 10,20,30,40"),
     ("sal_kitti_segments", "0", "expected lengths > 0 (m) separated by commas, e.g. 10,20,30,40"),
+    ("sal_executor", "dask", "expected local or ray"),
+    ("sal_ray_address", "cluster.example", "expected auto, ray://HOST:PORT, HOST:PORT or nothing (a local Ray)"),
+    ("sal_ray_address", "ray://head:port", "expected auto, ray://HOST:PORT, HOST:PORT or nothing (a local Ray)"),
 ]
 
 
@@ -122,6 +125,19 @@ def test_a_bad_ini_value_is_a_usage_error_naming_the_option(pytester: pytest.Pyt
     result = run(pytester, [], "-o", f"{name}={value}")
     assert result.ret == pytest.ExitCode.USAGE_ERROR
     result.stderr.fnmatch_lines([f"ERROR: pytest-sal: ini option {name} = {value!r}: {message}"])
+    assert calls(pytester) == 0
+
+
+def test_the_ray_executor_without_ray_installed_is_one_usage_error(pytester: pytest.Pytester) -> None:
+    """``--sal-executor ray`` where Ray is not installed says how to install it, before any run."""
+    pytester.makeconftest(
+        CONFTEST + "\nimport importlib.util\n_find = importlib.util.find_spec\n"
+        "importlib.util.find_spec = lambda name, *a: None if name == 'ray' else _find(name, *a)\n"
+    )
+    pytester.makepyfile(test_suite=HEADER + "@sal.require(tracking_rate >= 0.5, fog.visibility_m >= 25)\ndef test_x(sal_outcome): pass\n")
+    result = run(pytester, [], "--sal-executor", "ray")
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    result.stderr.fnmatch_lines(["ERROR: pytest-sal: --sal-executor ray needs Ray, which is not installed: pip install 'pytest-sal[ray]'"])
     assert calls(pytester) == 0
 
 

@@ -22,7 +22,7 @@ from typing import Any
 from pytest_sal.engine.run_job import RunJob, RunOutput, run_job
 from sal_wrappers import SlamSystem
 
-__all__ = ["EXECUTORS", "Executor", "LocalExecutor"]
+__all__ = ["EXECUTORS", "Executor", "LocalExecutor", "make_executor"]
 
 #: The executors ``--sal-executor`` takes.
 EXECUTORS = ("local", "ray")
@@ -77,3 +77,14 @@ class LocalExecutor(Executor):
 
     def _run(self, job: RunJob) -> RunOutput:
         return run_job(job)
+
+
+def make_executor(name: str, address: str = "", **options: Any) -> Executor:
+    """The executor ``name`` (``local`` or ``ray``); ``address`` and ``options`` go to Ray."""
+    if name == "local":
+        return LocalExecutor()
+    if name == "ray":
+        from pytest_sal.engine.ray_executor import RayExecutor
+
+        return RayExecutor(address, **options)
+    raise ValueError(f"unknown executor {name!r}; expected one of {', '.join(EXECUTORS)}")
