@@ -10,7 +10,16 @@ from typing import Any
 
 from sal_adapters import SalError
 
-__all__ = ["add_cache_arguments", "add_slam_arguments", "age_seconds", "parse_key_values", "positive_int", "positive_seconds"]
+__all__ = [
+    "add_cache_arguments",
+    "add_executor_arguments",
+    "add_slam_arguments",
+    "age_seconds",
+    "executor_from_args",
+    "parse_key_values",
+    "positive_int",
+    "positive_seconds",
+]
 
 #: seconds per unit of an age (``30d``, ``12h``, ``90m``, ``2w``, ``45s``)
 AGE_UNITS = {"s": 1.0, "m": 60.0, "h": 3600.0, "d": 86400.0, "w": 604800.0}
@@ -93,3 +102,28 @@ def add_cache_arguments(command: argparse.ArgumentParser, holds: str, no_cache: 
     command.add_argument("--cache-dir", type=Path, metavar="DIR", help=f"{holds} (default: .sal/cache)")
     if no_cache is not None:
         command.add_argument("--no-cache", action="store_true", help=no_cache)
+
+
+def add_executor_arguments(cmd: argparse.ArgumentParser) -> None:
+    """``--executor`` and ``--ray-address``: where the SLAM runs happen, as the plugin's
+    ``--sal-executor`` and ``--sal-ray-address``."""
+    cmd.add_argument(
+        "--executor",
+        choices=("local", "ray"),
+        default="local",
+        help="where SLAM runs happen: local (here, one at a time) or ray (Ray tasks, several at once; needs pytest-sal[ray]). "
+        "Default: %(default)s",
+    )
+    cmd.add_argument(
+        "--ray-address",
+        default="",
+        metavar="ADDRESS",
+        help="Ray cluster of --executor ray: auto, ray://HOST:10001, HOST:PORT, or empty for a local Ray started for this command",
+    )
+
+
+def executor_from_args(args: argparse.Namespace) -> Any:
+    """The ``Executor`` that ``--executor`` / ``--ray-address`` ask for (use it in a ``with``)."""
+    from pytest_sal.engine.executor import make_executor
+
+    return make_executor(args.executor, args.ray_address)

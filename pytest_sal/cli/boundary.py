@@ -11,7 +11,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from pytest_sal.cli.arg_types import add_cache_arguments, add_slam_arguments, parse_key_values
+from pytest_sal.cli.arg_types import add_cache_arguments, add_executor_arguments, add_slam_arguments, executor_from_args, parse_key_values
 from pytest_sal.experiment.boundary import (
     BoundaryResult,
     BoundarySearch,
@@ -32,6 +32,7 @@ EPILOG = """\
 examples:
   sal boundary example_suites/configs/fog_rain_urban.yaml --slam reference_vo
   sal boundary exp.yaml --slam orbslam3 --slam-option features=2000 --runs 3 --cache-dir /tmp/sal-cache
+  sal boundary exp.yaml --slam orbslam3 --executor ray --ray-address auto   # runs as Ray tasks, several at once
 
 The config needs an enabled robustness_boundary block (target_perturbation, parameter,
 lower_bound, upper_bound, tolerance, max_iters, ate_rmse_fail, fail_on_tracking_failure).
@@ -60,6 +61,7 @@ def add_boundary_commands(commands: argparse._SubParsersAction) -> None:
     cmd.add_argument("config", type=Path, metavar="CONFIG", help="experiment YAML with an enabled robustness_boundary block")
     add_slam_arguments(cmd, "the most runs per trial; runs vote until one verdict leads by 2, metrics are their median", default_runs=None)
     add_cache_arguments(cmd, "trial cache", no_cache="run every trial, read and store nothing in the cache")
+    add_executor_arguments(cmd)
     cmd.set_defaults(run=_run)
 
 
@@ -73,7 +75,8 @@ def _run(args: argparse.Namespace) -> int:
         config, system, runs=args.runs, timeout=args.timeout, cache_dir=args.cache_dir, use_cache=not args.no_cache
     )
     _print_setup(search)
-    result = run_boundary_search(search, on_trial=_step_printer(search), plot=metric_plot)
+    with executor_from_args(args) as executor:
+        result = run_boundary_search(search, on_trial=_step_printer(search), plot=metric_plot, executor=executor)
     _print_result(search, result)
     return 0
 

@@ -9,7 +9,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from pytest_sal.cli.arg_types import add_cache_arguments, add_slam_arguments, parse_key_values
+from pytest_sal.cli.arg_types import add_cache_arguments, add_executor_arguments, add_slam_arguments, executor_from_args, parse_key_values
 from pytest_sal.experiment.config import load_config
 from pytest_sal.experiment.evaluate import ScoredRun, evaluate_experiment
 from pytest_sal.experiment.schema import BASELINE
@@ -46,6 +46,7 @@ def add_evaluate_commands(commands: argparse._SubParsersAction) -> None:
     cmd.add_argument("config", type=Path, metavar="CONFIG", help="experiment YAML")
     add_slam_arguments(cmd, "runs per sequence")
     add_cache_arguments(cmd, "content cache of perturbed frames", no_cache="perturb in memory; read and store nothing in the cache")
+    add_executor_arguments(cmd)
     cmd.set_defaults(run=_run)
 
 
@@ -57,17 +58,19 @@ def _run(args: argparse.Namespace) -> int:
     options = parse_key_values(args.slam_option, "--slam-option")
     config = load_config(args.config)
     system = create(args.slam, **options)  # unknown name: SalError listing the known systems
-    summary = evaluate_experiment(
-        config,
-        system,
-        args.slam,
-        runs=args.runs,
-        timeout=args.timeout,
-        cache_dir=args.cache_dir,
-        use_cache=not args.no_cache,
-        on_run=lambda run: print(_progress(run)),
-        warn=lambda message: print(f"warning: {message}"),
-    )
+    with executor_from_args(args) as executor:
+        summary = evaluate_experiment(
+            config,
+            system,
+            args.slam,
+            runs=args.runs,
+            timeout=args.timeout,
+            cache_dir=args.cache_dir,
+            use_cache=not args.no_cache,
+            on_run=lambda run: print(_progress(run)),
+            warn=lambda message: print(f"warning: {message}"),
+            executor=executor,
+        )
     print(_table(summary))
     print(f"wrote {summary['root']}")
     return 0

@@ -44,7 +44,8 @@ class RunJob:
         value: the severity, in the searched parameter's unit (recorded with the run).
         label: what ``value`` is, for the plot title: ``fog.visibility_m = 30 m``.
         dataset: the clean sequence.
-        module: the perturbation (a module or a chain) configured at ``value``.
+        module: the perturbation (a module or a chain) configured at ``value``, or ``None``
+            when ``dataset`` is already the sequence to run on (``sal evaluate``'s cached copies).
         system: the SLAM system.
         seed: the perturbation seed.
         workdir: the folder under which the run writes its logs and files.
@@ -60,7 +61,7 @@ class RunJob:
     value: float
     label: str
     dataset: Sequence
-    module: Perturbation
+    module: Perturbation | None
     system: SlamSystem
     seed: int
     workdir: Path
@@ -95,7 +96,7 @@ def worker_name() -> str:
 
 def run_job(job: RunJob) -> RunOutput:
     """Perturb, run, score: one run of ``job`` in this process (the system may start its own child)."""
-    perturbed = perturb(job.dataset, job.module, seed=job.seed)
+    perturbed = job.dataset if job.module is None else perturb(job.dataset, job.module, seed=job.seed)
     if job.frames_cache is not None:
         perturbed = cached_sequence(perturbed, ContentCache(job.frames_cache))
     groundtruth = perturbed.groundtruth
@@ -126,7 +127,7 @@ def run_job(job: RunJob) -> RunOutput:
             images["trajectory"] = _trajectory_png(job, perturbed.name, groundtruth, scored.ate.estimate)
         if len(perturbed):
             images["frame"] = _example_frame_png(perturbed)
-    record: dict[str, Any] = {"value": job.value, "module": job.module.to_dict(), "metrics": metrics}
+    record: dict[str, Any] = {"value": job.value, "module": None if job.module is None else job.module.to_dict(), "metrics": metrics}
     if (reason := machine_failure(result, load)) is not None:
         record["not_cached"] = reason
     return RunOutput(record=record, result=result.to_dict(), images=images, worker=worker_name())

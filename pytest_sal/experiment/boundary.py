@@ -36,6 +36,7 @@ from sal_adapters.atomic import Replacement
 from sal_adapters.textfiles import atomic_write_text
 
 if TYPE_CHECKING:  # numpy, OpenCV and the modules load when a search runs, not for `sal --help`
+    from pytest_sal.engine.executor import Executor
     from pytest_sal.engine.outcome import Outcome, Trial
     from pytest_sal.engine.requirements import Requirement
     from pytest_sal.store.trial_cache import ContentCache
@@ -173,11 +174,14 @@ def run_boundary_search(
     *,
     on_trial: Callable[[Trial], None] | None = None,
     plot: Callable[[Outcome, Path], object] | None = None,
+    executor: Executor | None = None,
 ) -> BoundaryResult:
     """Run ``search`` (``on_trial``: called with each trial as it ends, again when a
     confirmation adds runs to it) and write its summary and, with ``plot`` (a function drawing
-    an outcome as a PNG at a path), ``boundary_plot.png``; both replace the previous ones together."""
+    an outcome as a PNG at a path), ``boundary_plot.png``; both replace the previous ones together.
+    ``executor``: where the runs happen (``None``: here, one at a time)."""
     from pytest_sal.analysis.kitti_metrics import KITTI_SEGMENTS_M
+    from pytest_sal.engine.executor import LocalExecutor
     from pytest_sal.engine.requirement_runner import SearchSettings, search_outcome
     from pytest_sal.engine.trial_runner import TrialRunner
 
@@ -194,6 +198,7 @@ def run_boundary_search(
         timeout=search.timeout,
         progress=on_trial,
         kitti_segments=config.evaluation.kitti_segments_m or KITTI_SEGMENTS_M,
+        executor=executor or LocalExecutor(),
     )
     outcome = search_outcome(runner, search.requirement, SearchSettings(), f"sal boundary {config.experiment.name}/{rb.name}")
     summary_path = search.folder / SUMMARY_FILE

@@ -23,6 +23,10 @@ aborts the rest. ``SalError`` from a system (bad use: an unsupported sensor) sti
 Each perturbed sequence is computed once (or taken from the content cache that ``sal perturb``
 and the plugin fill, keyed by the sequence's fingerprint) and read back for every run; the
 SLAM runs themselves are never cached: N runs measure the system's run-to-run spread.
+
+With an ``executor`` that runs elsewhere (``--executor ray``), every sequence's run number k
+goes to it at once, as many at a time as it has room for; the workers read the perturbed
+frames from the content cache at the same path, so that path must be shared with them.
 """
 
 from __future__ import annotations
@@ -45,6 +49,7 @@ from sal_adapters.textfiles import atomic_write_text
 
 if TYPE_CHECKING:  # numpy and scipy load when a command runs, not for `sal --help`
     from pytest_sal.analysis.metrics import RunMetrics
+    from pytest_sal.engine.executor import Executor
     from sal_adapters.sequence import Sequence
     from sal_adapters.trajectory import Trajectory
     from sal_wrappers.base import SlamSystem
@@ -82,17 +87,24 @@ def evaluate_experiment(
     progress: bool = True,
     on_run: Callable[[ScoredRun], None] | None = None,
     warn: Callable[[str], None] = _ignore,
+    executor: Executor | None = None,
 ) -> dict[str, Any]:
     """Run ``system`` (created as ``slam``, the name of its results folder) ``runs`` times on the
     clean and every perturbed sequence, score and write everything (see the module text).
     Perturbed sequences go through the content cache at ``cache_dir`` (default ``.sal/cache``)
     unless ``use_cache`` is false (``progress``: a bar while one is written); ``timeout``:
     seconds per run. ``on_run`` is called with each run as it is scored, ``warn`` with each
-    warning (no ground truth, a plot that failed). Returns the summary (also in
-    ``metrics/summary.json``) with ``root``, the results folder, added."""
+    warning (no ground truth, a plot that failed). ``executor``: where the runs happen
+    (``None`` or ``local``: here, one at a time; another one needs the cache). Returns the
+    summary (also in ``metrics/summary.json``) with ``root``, the results folder, added."""
     from pytest_sal.engine.run_job import cached_sequence
     from pytest_sal.store.trial_cache import command_cache
 
+    remote = executor if executor is not None and executor.name != "local" else None
+    if remote is not None and not use_cache:
+        raise SalError(
+            f"sal evaluate --executor {remote.name} needs the cache: its workers read the perturbed frames from it; drop --no-cache"
+        )
     clean = build_sequence(config)
     groundtruth = clean.groundtruth
     sequences = perturbed_sequences(config, clean)
@@ -107,7 +119,8 @@ def evaluate_experiment(
         root = outputs.folder(final)
         all_metrics: dict[str, list[Any]] = {name: [] for name in sequences}
         for k in range(1, runs + 1):
-            run_metrics = _evaluate_run(config, system, sequences, root, k, runs, timeout, groundtruth, on_run)
+            ran = _run_elsewhere(remote, config, system, sequences, root, k, timeout) if remote is not None else {}
+            run_metrics = _evaluate_run(config, system, sequences, root, k, runs, timeout, groundtruth, on_run, ran)
             for name, metrics in run_metrics.items():
                 all_metrics[name].append(metrics)
             run_plots(root, k, run_metrics, groundtruth, warn)
@@ -127,17 +140,22 @@ def _evaluate_run(
     timeout: float | None,
     groundtruth: Trajectory | None,
     on_run: Callable[[ScoredRun], None] | None,
+    ran: dict[str, tuple[Any, float]],
 ) -> dict[str, Any]:
     """Run number ``k`` on every sequence (the baseline first): its trajectories and records
-    written under ``root``; its ``RunMetrics`` by sequence name."""
+    written under ``root``; its ``RunMetrics`` by sequence name. ``ran``: runs that already
+    happened elsewhere (``RunResult`` and seconds by sequence name); the others run here."""
     metrics_dir = root / "metrics" / f"run_{k}"
     run_metrics: dict[str, Any] = {}
     for name, sequence in sequences.items():
         workdir = root / "work" / f"run_{k}" / name
         workdir.mkdir(parents=True, exist_ok=True)
-        start = time.perf_counter()
-        result = _run_system(system, sequence, workdir, timeout)
-        seconds = time.perf_counter() - start
+        if name in ran:
+            result, seconds = ran[name]
+        else:
+            start = time.perf_counter()
+            result = _run_system(system, sequence, workdir, timeout)
+            seconds = time.perf_counter() - start
         metrics = run_metrics[name] = _score(result, groundtruth, config.evaluation.kitti_segments_m)
         if result.trajectory is not None and len(result.trajectory):
             path = root / "trajectories" / f"run_{k}" / f"{name}.txt"
@@ -153,6 +171,44 @@ def _evaluate_run(
 
 
 # -- running and scoring ---------------------------------------------------------------------------
+def _run_elsewhere(
+    executor: Executor,
+    config: ExperimentConfig,
+    system: SlamSystem,
+    sequences: dict[str, Sequence],
+    root: Path,
+    k: int,
+    timeout: float | None,
+) -> dict[str, tuple[Any, float]]:
+    """Run number ``k`` of every sequence on ``executor``, up to its free slots at once:
+    ``(RunResult, seconds)`` by sequence name."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from pytest_sal.analysis.kitti_metrics import KITTI_SEGMENTS_M
+    from pytest_sal.engine.run_job import RunJob
+    from sal_wrappers.base import RunResult
+
+    def run(name: str) -> tuple[Any, float]:
+        job = RunJob(
+            key=name,
+            number=k,
+            value=math.nan,
+            label=name,
+            dataset=sequences[name],
+            module=None,
+            system=system,
+            seed=config.experiment.seed,
+            workdir=root / "work" / f"run_{k}" / name,
+            timeout=timeout,
+            kitti_segments=config.evaluation.kitti_segments_m or KITTI_SEGMENTS_M,
+        )
+        result = RunResult.from_dict(executor.run(job).result)
+        return result, result.wall_time_s
+
+    with ThreadPoolExecutor(max_workers=max(1, executor.slots(system)), thread_name_prefix="sal-evaluate") as pool:
+        return dict(zip(sequences, pool.map(run, sequences)))
+
+
 def _run_system(system: Any, sequence: Any, workdir: Path, timeout: float | None) -> Any:
     """``system.run``; an exception other than ``SalError`` becomes a failed ``RunResult``."""
     import numpy as np
