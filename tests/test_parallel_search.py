@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -22,7 +23,7 @@ from pytest_sal.engine.outcome import Outcome
 from pytest_sal.engine.requirement_runner import SearchSettings, run_search, search_outcome, search_width
 from pytest_sal.engine.requirements import Requirement
 from pytest_sal.engine.run_job import RunJob, RunOutput, run_job
-from pytest_sal.engine.trial_runner import TrialRunner
+from pytest_sal.engine.trial_runner import TrialRunner, VotePolicy
 from pytest_sal.report.formatting import trial_line
 from pytest_sal.testing import FakeSlam
 from sal_adapters import open_dataset
@@ -249,6 +250,45 @@ def test_a_confirmation_that_turns_an_end_still_rebuilds_the_bracket(k: int) -> 
     assert result.fail_value < 14.3 <= result.pass_value and result.pass_value - result.fail_value <= 1
     assert result.termination == "tolerance"
     assert [t.passed for t in result.trials if t.value == 17.5] == [True]  # turned by the confirmation
+
+
+class NoisyVotes:
+    """A noisy system that truly fails below 14.3 m; each run gives the wrong verdict with
+    probability 1/6, drawn from (seed, value, run number), so threads cannot change it. Trials
+    vote by ``VotePolicy``; it is the search's ``Judge``."""
+
+    def __init__(self, seed: int, policy: VotePolicy):
+        self.seed, self.policy = seed, policy
+
+    def _extend(self, value: float, votes: list[bool], confirming: bool) -> bool:
+        while not votes or self.policy.more(sum(votes), len(votes) - sum(votes), confirming):
+            unlucky = np.random.default_rng([self.seed, int(value * 1e6), len(votes)]).random() < 1 / 6
+            votes.append((value >= 14.3) != unlucky)
+        return 2 * sum(votes) > len(votes)
+
+    def evaluate(self, value: float) -> tuple[bool, tuple[float, list[bool]]]:
+        votes: list[bool] = []
+        return self._extend(value, votes, False), (value, votes)
+
+    def confirm(self, info: tuple[float, list[bool]]) -> bool:
+        return self._extend(info[0], info[1], True)
+
+    def settled(self, info: tuple[float, list[bool]]) -> bool:
+        return abs(2 * sum(info[1]) - len(info[1])) >= self.policy.lead
+
+
+@pytest.mark.parametrize("k", [2, 3, 7])
+def test_a_noisy_search_confirms_the_edge_and_both_final_ends_at_every_width(k: int) -> None:
+    policy = VotePolicy(max_runs=5)
+    for seed in range(10):
+        system = NoisyVotes(seed, policy)
+        result = boundary_search(
+            system.evaluate, SearchSpace(mild=100.0, severe=1.0), 25, rel_tolerance=0.1, max_trials=10, judge=system, width=fixed(k)
+        )
+        ends = [next(t for t in reversed(result.trials) if t.value == v) for v in (result.pass_value, result.fail_value) if v is not None]
+        for trial in [result.trials[0], *ends]:  # confirmed: a lead of 3, or the confirmation's cap of 7 runs
+            votes = trial.info[1]
+            assert not policy.more(sum(votes), len(votes) - sum(votes), confirming=True), (seed, trial.value, votes)
 
 
 # -- through the TrialRunner: an executor with k free slots ------------------------------------------------------
