@@ -85,19 +85,17 @@ class Row:
     interval: str
 
 
-def measure(k: int, base: Executor | None, args: argparse.Namespace, workdir: Path) -> Row:
-    """Search ``args.repeats`` times with at most ``k`` runs at once; the median wall time (the
-    rest is the same every time: the system is deterministic and nothing is cached)."""
+def measure(k: int, base: Executor | None, args: argparse.Namespace, workdir: Path, repeats: int) -> Row:
+    """Search ``repeats`` times with at most ``k`` runs at once; the median wall time (the rest
+    is the same every time: the system is deterministic and nothing is cached)."""
     dataset = open_dataset("synthetic", scene="indoor", frames=args.frames, sensor="rgbd")
     requirement = Requirement.build([tracking_rate >= 0.5, fog.visibility_m >= 25])
     settings = SearchSettings(tolerance_pct=args.tolerance_pct, max_trials=args.max_trials)
     rows = []
-    for repeat in range(args.repeats):
+    for repeat in range(repeats):
         executor = CallingThread(k) if base is None else Capped(base, k)
         system = SleepySlam(sleep_s=args.sleep)
         runner = TrialRunner(dataset, fog.visibility_m.ref(), system, requirement, workdir=workdir / f"k{k}-{repeat}", executor=executor)
-        if repeat == 0 and k == args.k[0]:
-            runner.evaluate(25.0)  # warm-up: imports, the synthetic world, Ray's workers
         start = time.perf_counter()
         result = run_search(runner, requirement, settings)
         wall = time.perf_counter() - start
@@ -150,7 +148,8 @@ def main(argv: list[str] | None = None) -> int:
     base = ray_executor(args) if args.executor == "ray" else None
     try:
         with tempfile.TemporaryDirectory(prefix="sal-bench-search-") as folder:
-            rows = [measure(k, base, args, Path(folder)) for k in args.k]
+            measure(max(args.k), base, args, Path(folder) / "warm-up", 1)  # imports, and as many Ray workers as the widest round
+            rows = [measure(k, base, args, Path(folder), args.repeats) for k in args.k]
     finally:
         if base is not None:
             base.close()
