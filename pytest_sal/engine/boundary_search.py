@@ -182,7 +182,8 @@ def boundary_search(
         judge: confirms verdicts of a noisy system (``None``: every verdict is final).
         rel_tolerance: stop when the bracket's width is at most this share of its larger end.
         width: how many trials a round may hold now, asked before each round (``None``: 1,
-            the sequential search).
+            the sequential search); above 1, ``evaluate`` and ``judge.confirm`` are called
+            from several threads at once, for distinct trials.
     """
     if tolerance is None and rel_tolerance is None:
         raise ValueError("boundary_search needs tolerance or rel_tolerance")
