@@ -114,7 +114,7 @@ def differences(case: Case, width: Callable[[], int]) -> list[str]:
     return found
 
 
-@settings(max_examples=200, deadline=None, derandomize=True, database=None)
+@settings(max_examples=100, deadline=None, derandomize=True, database=None)
 @given(case=cases(), widths=st.lists(st.sampled_from(WIDTHS), min_size=1, max_size=4))
 def test_a_deterministic_system_gets_the_sequential_interval_at_every_width(case: Case, widths: list[int]) -> None:
     for k in WIDTHS:
