@@ -11,6 +11,7 @@ The product never uses it: real tests run ORB-SLAM3 or the reference VO.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from collections.abc import Callable
@@ -22,7 +23,7 @@ import numpy as np
 from sal_adapters import Sequence
 from sal_wrappers.base import RunResult, SlamSystem, TrackState
 
-__all__ = ["FakeSlam", "applied_value"]
+__all__ = ["FakeSlam", "SleepySlam", "applied_value"]
 
 
 def applied_value(sequence: Sequence, address: str) -> float | None:
@@ -94,3 +95,31 @@ class FakeSlam(SlamSystem):
             track_time_s=0.0,
             info={"value": value, "share": share},
         )
+
+
+class SleepySlam(FakeSlam):
+    """``FakeSlam`` whose every run first sleeps ``sleep_s`` seconds, using no CPU: a system whose
+    runs take a fixed time, so a benchmark measures the scheduling (a parallel search, an
+    executor's slots) beyond the machine's cores. By default it tracks every frame on the mild
+    side of 20 m fog visibility and a quarter of them beyond (``tracking_rate >= 0.5`` fails
+    below 20 m); the trajectory it returns is scored like any system's. It pickles with plain
+    pickle (its options rebuild it), so it can travel to a Ray worker."""
+
+    name = "sleepy"
+    description = "deterministic fake SLAM whose runs sleep a fixed time (for scheduling benchmarks)"
+
+    def __init__(self, parameter: str = "fog.visibility_m", tracked: str = "1 if v >= 20 else 0.25", sleep_s: float = 0.3):
+        super().__init__(parameter, tracked)
+        self.sleep_s = float(sleep_s)
+
+    def options(self) -> dict[str, Any]:
+        return {**super().options(), "sleep_s": self.sleep_s}
+
+    def run(self, sequence: Sequence, workdir: Path, timeout: float | None = None) -> RunResult:
+        start = time.perf_counter()
+        time.sleep(self.sleep_s)
+        result = super().run(sequence, workdir, timeout)
+        return dataclasses.replace(result, wall_time_s=time.perf_counter() - start)
+
+    def __reduce__(self) -> tuple[type, tuple[str, str, float]]:
+        return SleepySlam, (self.parameter, self.tracked, self.sleep_s)

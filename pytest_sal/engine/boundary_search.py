@@ -24,19 +24,53 @@ whose runs never settled on a verdict makes the result ``flaky``.
 A previous boundary ``warm_start`` is tried right after the edge: when it still brackets within
 tolerance, an unchanged system needs three trials. Every trial is checked against the order: a
 pass more severe than a fail contradicts monotonicity and is reported.
+
+Free workers. ``width`` says before each round how many trials a round may hold now (free
+workers over the runs a trial needs). A round is one evaluation of several values at once, each
+in its own thread (``evaluate`` and ``Judge.confirm`` must then be safe to call from several
+threads for distinct values), or one confirmation. The edge goes alone; the warm-start hints
+go together; then the far end; the final confirmation of both ends is one round. Bisection
+speculates: with ``k`` trials free it evaluates the first ``k`` nodes, breadth-first, of the
+bisection tree below the bracket (``k = 3``: the midpoint and both quarter points, the 4-ary
+search; ``k = 7``: the 8-ary search). A node exists only where the sequential search would
+evaluate it on reaching its bracket (the same tolerance, domain and budget rules, its depth
+counted against ``max_trials``). A partial last level takes its nodes in bit-reversed order
+(each node's path of verdicts from the root read backwards), so they spread evenly over the
+bracket, starting on the side the path's last verdict leads to if it repeats: a boundary near
+an end of the bracket gives runs of equal verdicts (0..1000 to 0.5 at ``k = 2``: 6.8 bisection
+rounds against 8.0 for a fixed side with boundaries log-uniformly 0.1-316 from an end, 7.6 for
+both with uniform ones). After a pass, ``k = 2`` is the midpoint and the quarter point on the
+fail side, and ``k = 5`` adds an eighth point in each half. The round then walks the tree along
+the verdicts: the trials on that walk are the search path, appended in its order and counted by
+``max_trials``; the others are appended after them, ``speculative``, extra to the budget.
+
+Why the interval is the sequential one: a node lies strictly inside its bracket, and its two
+children bisect the halves the sequential search would hold after its pass or fail (a verdict
+strictly inside the bracket moves the matching end, whatever came before), so the walk
+evaluates what the sequential search would, in its order. Each node off the walk lies in a half
+the walk turned away from, outside the bracket the walk ends in, and a trial outside the bracket
+moves neither end (``_Search.bracket`` takes only a pass or a fail strictly between them): for
+any deterministic system, a monotone one included, off-path trials never move the bracket, and
+interval, termination and verdict are those of the sequential search. They add to
+``contradictions`` only where the system is not monotone. When a confirmation turns a verdict,
+the bracket is rebuilt from every trial, off-path ones included.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from typing import Any, Literal, Protocol
+from typing import Any, Literal, Protocol, TypeVar
 
 __all__ = ["TERMINATIONS", "Judge", "SearchResult", "SearchSpace", "TrialPoint", "boundary_search"]
 
 #: Why a search stopped.
 TERMINATIONS = ("tolerance", "max_trials", "not_bracketed", "domain_resolution")
+
+_Item = TypeVar("_Item")
+_Done = TypeVar("_Done")
 
 
 @dataclass(frozen=True)
@@ -74,11 +108,13 @@ class SearchSpace:
 
 @dataclass
 class TrialPoint:
-    """One evaluated value: ``passed`` and whatever the evaluator reported (``info``)."""
+    """One evaluated value: ``passed`` and whatever the evaluator reported (``info``);
+    ``speculative``: evaluated in a round beside the search path and left off it."""
 
     value: float
     passed: bool
     info: Any = None
+    speculative: bool = False
 
 
 class Judge(Protocol):
@@ -102,9 +138,10 @@ class SearchResult:
         pass_value, fail_value: the bracket: the most severe value seen to pass next to the
             mildest value seen to fail (either may be ``None`` when not bracketed).
         termination: one of ``TERMINATIONS``.
-        trials: every evaluation in order.
+        trials: every evaluation: each round's path trials in order, then its speculative ones.
         contradictions: trials that contradict monotonicity, in words.
         flaky: the edge's runs disagreed and never settled on a verdict.
+        rounds: evaluation rounds and confirmation rounds (one at a time: trials plus confirmations).
     """
 
     edge_passed: bool
@@ -114,6 +151,12 @@ class SearchResult:
     trials: list[TrialPoint] = field(default_factory=list)
     contradictions: list[str] = field(default_factory=list)
     flaky: bool = False
+    rounds: int = 0
+
+    @property
+    def speculative(self) -> int:
+        """Trials evaluated beside the search path and left off it (extra to ``max_trials``)."""
+        return sum(t.speculative for t in self.trials)
 
 
 def boundary_search(
@@ -125,6 +168,7 @@ def boundary_search(
     warm_start: tuple[float | None, float | None] | None = None,
     judge: Judge | None = None,
     rel_tolerance: float | None = None,
+    width: Callable[[], int] | None = None,
 ) -> SearchResult:
     """Search the failure boundary (see the module text).
 
@@ -133,70 +177,107 @@ def boundary_search(
         space: search range, domain and scale.
         edge: the envelope's edge (its most severe value).
         tolerance: stop when ``|pass_value - fail_value| <= tolerance`` (the parameter's unit).
-        max_trials: at most this many evaluations, the edge included.
+        max_trials: at most this many evaluations on the search path, the edge included.
         warm_start: a previous ``(pass_value, fail_value)`` tried first after the edge.
         judge: confirms verdicts of a noisy system (``None``: every verdict is final).
         rel_tolerance: stop when the bracket's width is at most this share of its larger end.
+        width: how many trials a round may hold now, asked before each round (``None``: 1,
+            the sequential search); above 1, ``evaluate`` and ``judge.confirm`` are called
+            from several threads at once, for distinct trials.
     """
     if tolerance is None and rel_tolerance is None:
         raise ValueError("boundary_search needs tolerance or rel_tolerance")
-    search = _Search(evaluate, space, max_trials, judge)
-    edge_passed = search.run(edge)
+    search = _Search(evaluate, space, max_trials, judge, width or (lambda: 1), tolerance, rel_tolerance)
+    (first,) = search.run([edge])
     flaky = False
     if judge is not None:
-        edge_passed = search.confirm(search.trials[0])
-        flaky = not judge.settled(search.trials[0].info)
+        search.confirm([first])
+        flaky = not judge.settled(first.info)
+    edge_passed = first.passed
     far = space.severe if edge_passed else space.mild
 
-    for hint in warm_start or ():
-        if hint is None or search.spent or hint == edge:
-            continue
-        if (edge_passed and space.worse(hint, edge)) or (not edge_passed and space.worse(edge, hint)):
-            search.run(hint)
+    beyond = [h for h in warm_start or () if h is not None and h != edge and space.worse(h, edge) == edge_passed]
+    search.run(beyond[: max(0, max_trials - search.path_trials)])
 
     passing, failing = search.bracket()
     unbracketed = (passing is None or failing is None) and not search.spent and all(t.value != far for t in search.trials)
-    if unbracketed and search.run(far) == edge_passed and judge is not None:  # "never failed/passed" is a claim to confirm
-        search.confirm(search.trials[-1])
+    if unbracketed and search.run([far])[0].passed == edge_passed and judge is not None:  # "never failed/passed" is a claim to confirm
+        search.confirm(search.trials[-1:])
     while True:
         passing, failing = search.bracket()
         if passing is None or failing is None:
             termination = "not_bracketed" if any(t.value == far for t in search.trials) else "max_trials"
             break
-        termination = search.bisect(tolerance, rel_tolerance)
+        termination = search.bisect()
         if judge is None or not search.confirm_ends():
             break
         if search.spent:  # an end turned, and no budget is left to search the new bracket
             termination = "max_trials"
             break
     passing, failing = search.bracket()
-    return SearchResult(search.trials[0].passed, passing, failing, termination, search.trials, _contradictions(search.trials, space), flaky)
+    return SearchResult(
+        first.passed, passing, failing, termination, search.trials, _contradictions(search.trials, space), flaky, search.rounds
+    )
+
+
+@dataclass(frozen=True)
+class _Node:
+    """A bracket the bisection tree reaches and the value that bisects it; ``path``: the verdicts
+    that lead to it from the round's root (1: a pass, which keeps the fail-side half)."""
+
+    passing: float
+    failing: float
+    path: tuple[int, ...]
+    value: float
+
+    def children(self, space: SearchSpace) -> tuple[_Node, _Node]:
+        """The halves after a fail and after a pass at ``value``."""
+        return (
+            _Node(self.passing, self.value, (*self.path, 0), space.midpoint(self.passing, self.value)),
+            _Node(self.value, self.failing, (*self.path, 1), space.midpoint(self.value, self.failing)),
+        )
 
 
 class _Search:
-    """The trials of one search and the bracket they give."""
+    """The trials of one search, the bracket they give and the rounds that evaluated them."""
 
-    def __init__(self, evaluate: Callable[[float], tuple[bool, Any]], space: SearchSpace, max_trials: int, judge: Judge | None):
+    def __init__(
+        self,
+        evaluate: Callable[[float], tuple[bool, Any]],
+        space: SearchSpace,
+        max_trials: int,
+        judge: Judge | None,
+        width: Callable[[], int],
+        tolerance: float | None,
+        rel_tolerance: float | None,
+    ):
         self.evaluate = evaluate
         self.space = space
         self.max_trials = max_trials
         self.judge = judge
+        self.width = width
+        self.tolerance = tolerance
+        self.rel_tolerance = rel_tolerance
         self.trials: list[TrialPoint] = []
+        self.rounds = 0
+
+    @property
+    def path_trials(self) -> int:
+        return sum(not t.speculative for t in self.trials)
 
     @property
     def spent(self) -> bool:
-        return len(self.trials) >= self.max_trials
+        return self.path_trials >= self.max_trials
 
-    def run(self, value: float) -> bool:
-        passed, info = self.evaluate(value)
-        self.trials.append(TrialPoint(value, bool(passed), info))
-        return bool(passed)
+    def run(self, values: list[float]) -> list[TrialPoint]:
+        """Evaluate ``values`` on the search path, ``width()`` of them a round."""
+        points = self._in_rounds(self._point, values)
+        self.trials += points
+        return points
 
-    def confirm(self, trial: TrialPoint) -> bool:
-        """Let the judge confirm ``trial``; whether its verdict changed is seen in ``passed``."""
-        assert self.judge is not None
-        trial.passed = bool(self.judge.confirm(trial.info))
-        return trial.passed
+    def confirm(self, trials: list[TrialPoint]) -> None:
+        """Let the judge confirm ``trials``, ``width()`` of them a round; turned verdicts show in ``passed``."""
+        self._in_rounds(self._confirm_one, trials)
 
     def bracket(self) -> tuple[float | None, float | None]:
         """The most severe pass that is milder than every fail seen so far, and the mildest
@@ -211,33 +292,85 @@ class _Search:
                 failing = t.value
         return passing, failing
 
-    def bisect(self, tolerance: float | None, rel_tolerance: float | None) -> str:
-        """Halve the bracket until tolerance, domain resolution or the trial budget stops it."""
+    def bisect(self) -> str:
+        """Halve the bracket, a round of the bisection tree at a time, until tolerance, domain
+        resolution or the trial budget stops it; why it stopped."""
         while True:
             passing, failing = self.bracket()
             assert passing is not None and failing is not None
-            width = abs(passing - failing)
-            if (tolerance is not None and width <= tolerance) or (
-                rel_tolerance is not None and width <= rel_tolerance * max(abs(passing), abs(failing))
-            ):
-                return "tolerance"
-            if self.space.neighbours(passing, failing):
-                return "domain_resolution"
-            if self.spent:
-                return "max_trials"
-            mid = self.space.midpoint(passing, failing)
-            if mid in (passing, failing):
-                return "domain_resolution"
-            self.run(mid)
+            if (stop := self._stop(passing, failing)) is not None:
+                return stop
+            nodes = self._tree(passing, failing, max(1, self.width()))
+            reached = dict(zip((node.path for node in nodes), self._round(self._point, [node.value for node in nodes])))
+            path: tuple[int, ...] = ()
+            while (point := reached.pop(path, None)) is not None:
+                self.trials.append(point)
+                path = (*path, int(point.passed))
+            for point in reached.values():
+                point.speculative = True
+                self.trials.append(point)
 
     def confirm_ends(self) -> bool:
         """Confirm the trials at both ends of the bracket; ``True`` when a verdict turned."""
-        turned = False
-        for value in self.bracket():
-            trial = next(t for t in reversed(self.trials) if t.value == value)
-            before = trial.passed
-            turned |= self.confirm(trial) != before
-        return turned
+        ends = [next(t for t in reversed(self.trials) if t.value == value) for value in self.bracket()]
+        before = [t.passed for t in ends]
+        self.confirm(ends)
+        return [t.passed for t in ends] != before
+
+    def _stop(self, passing: float, failing: float, ahead: int = 0) -> str | None:
+        """Why the sequential search would stop at this bracket, ``ahead`` path trials from now
+        (``None``: it would evaluate the midpoint)."""
+        width = abs(passing - failing)
+        if (self.tolerance is not None and width <= self.tolerance) or (
+            self.rel_tolerance is not None and width <= self.rel_tolerance * max(abs(passing), abs(failing))
+        ):
+            return "tolerance"
+        if self.space.neighbours(passing, failing):
+            return "domain_resolution"
+        if self.path_trials + ahead >= self.max_trials:
+            return "max_trials"
+        if not min(passing, failing) < self.space.midpoint(passing, failing) < max(passing, failing):
+            return "domain_resolution"  # a float resolution's end (or a geometric mean that underflowed)
+        return None
+
+    def _tree(self, passing: float, failing: float, size: int) -> list[_Node]:
+        """The first ``size`` nodes, breadth-first, of the bisection tree below the bracket: the
+        brackets the sequential search would bisect next, a partial last level taken in
+        bit-reversed order (sorted by the path read backwards: spread evenly), starting on the
+        side the path's last verdict leads to (a pass: the fail-side half)."""
+        lean = int(next(t.passed for t in reversed(self.trials) if not t.speculative))
+        chosen: list[_Node] = []
+        level = [_Node(passing, failing, (), self.space.midpoint(passing, failing))]
+        while level and len(chosen) < size:
+            found = [n for n in level if self._stop(n.passing, n.failing, ahead=len(n.path)) is None]
+            found.sort(key=lambda n: [bit ^ lean for bit in reversed(n.path)])
+            found = found[: size - len(chosen)]
+            chosen += found
+            level = [child for node in found for child in node.children(self.space)]
+        return chosen
+
+    def _point(self, value: float) -> TrialPoint:
+        passed, info = self.evaluate(value)
+        return TrialPoint(value, bool(passed), info)
+
+    def _confirm_one(self, trial: TrialPoint) -> None:
+        assert self.judge is not None
+        trial.passed = bool(self.judge.confirm(trial.info))
+
+    def _in_rounds(self, work: Callable[[_Item], _Done], items: Sequence[_Item]) -> list[_Done]:
+        """``work`` on each item, ``width()`` items a round."""
+        done: list[_Done] = []
+        while len(done) < len(items):
+            done += self._round(work, items[len(done) : len(done) + max(1, self.width())])
+        return done
+
+    def _round(self, work: Callable[[_Item], _Done], items: Sequence[_Item]) -> list[_Done]:
+        """One round: ``work`` on every item at once, each in its own thread (in this one for a single item)."""
+        self.rounds += 1
+        if len(items) == 1:
+            return [work(items[0])]
+        with ThreadPoolExecutor(max_workers=len(items), thread_name_prefix="sal-search") as pool:
+            return list(pool.map(work, items))
 
 
 def _contradictions(trials: list[TrialPoint], space: SearchSpace) -> list[str]:

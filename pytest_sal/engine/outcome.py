@@ -90,6 +90,8 @@ class Trial:
         failed: the criteria that did not hold on the median metrics, in words.
         artifacts: files made for reports, by kind: ``frame`` (an example perturbed frame,
             PNG), ``trajectory`` (ground truth and estimate, PNG).
+        speculative: evaluated by a parallel search beside its path and left off it (extra to
+            the trial budget; see ``pytest_sal.engine.boundary_search``).
     """
 
     value: float
@@ -100,6 +102,7 @@ class Trial:
     wall_time_s: float = 0.0
     failed: list[str] = field(default_factory=list)
     artifacts: dict[str, str] = field(default_factory=dict)
+    speculative: bool = False
 
     def __setattr__(self, name: str, value: Any) -> None:
         if name == "metrics" and not isinstance(value, TrialMetrics):

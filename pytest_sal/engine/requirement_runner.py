@@ -1,12 +1,14 @@
 """From a requirement to an ``Outcome``: the search range and tolerance, the boundary search
-over trials, the verdict, the margin and the words a failed test shows."""
+over trials (several at once where the executor has free workers), the verdict, the margin and
+the words a failed test shows."""
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from pytest_sal.engine.boundary_search import SearchSpace, boundary_search
+from pytest_sal.engine.boundary_search import SearchResult, SearchSpace, boundary_search
 from pytest_sal.engine.outcome import Boundary, Outcome, Trial
 from pytest_sal.engine.requirements import InvalidRequirement, Requirement
 from sal_modules.param_refs import ParamRef
@@ -14,7 +16,7 @@ from sal_modules.param_refs import ParamRef
 if TYPE_CHECKING:  # the plugin reads SearchSettings at configure time, before any trial runs
     from pytest_sal.engine.trial_runner import TrialRunner
 
-__all__ = ["SearchSettings", "failure_message", "search_outcome", "search_space", "single_outcome"]
+__all__ = ["SearchSettings", "failure_message", "run_search", "search_outcome", "search_space", "search_width", "single_outcome"]
 
 
 @dataclass(frozen=True)
@@ -40,23 +42,29 @@ def search_space(ref: ParamRef, search_range: tuple[float, float] | None = None)
     return SearchSpace(mild=float(mild), severe=float(severe), domain=scale.domain, scale=scale.scale)
 
 
-def search_outcome(
+def search_width(runner: TrialRunner) -> int:
+    """How many trials a round of the search may hold now: the runs ``runner``'s executor can
+    take at once over the runs a trial's first vote needs (1 for a deterministic system, the
+    lead for a noisy one); at least 1 (``local``: always 1, the sequential search)."""
+    return max(1, runner.executor.slots(runner.system) // runner.policy.needed(0, 0))
+
+
+def run_search(
     runner: TrialRunner,
     requirement: Requirement,
     settings: SearchSettings,
-    test_id: str,
     warm_start: tuple[float | None, float | None] | None = None,
-) -> Outcome:
-    """Run the boundary search of ``requirement`` with ``runner`` and describe what it found."""
+) -> SearchResult:
+    """The boundary search of ``requirement`` with ``runner``: a round's trials are evaluated
+    and confirmed in threads, as many as ``search_width`` allows; a trial left off the search
+    path is marked ``Trial.speculative``."""
     envelope = requirement.envelope
     assert envelope is not None
-    ref = envelope.ref
-    space = search_space(ref, requirement.options.get("search_range"))
-    edge = envelope.value
+    space = search_space(envelope.ref, requirement.options.get("search_range"))
     tolerance = requirement.options.get("tolerance")
     rel_tolerance = None if tolerance is not None else settings.tolerance_pct / 100
     max_trials = requirement.options.get("max_trials", settings.max_trials)
-    unchanged = runner.unchanged_frames(edge)
+    unchanged = runner.unchanged_frames(envelope.value)
     if unchanged is not None:
         raise InvalidRequirement(
             f"{envelope}: the envelope's edge leaves the frames of {runner.dataset.name} unchanged (frames "
@@ -68,9 +76,34 @@ def search_outcome(
         trial = runner.evaluate(value)
         return trial.passed, trial
 
-    result = boundary_search(evaluate, space, edge, tolerance, max_trials, warm_start, judge=runner, rel_tolerance=rel_tolerance)
+    judge = runner if runner.policy.noisy else None  # one run per trial: every verdict is final
+    result = boundary_search(
+        evaluate,
+        space,
+        envelope.value,
+        tolerance,
+        max_trials,
+        warm_start,
+        judge=judge,
+        rel_tolerance=rel_tolerance,
+        width=functools.partial(search_width, runner),
+    )
+    for point in result.trials:
+        point.info.speculative = point.speculative
+    return result
+
+
+def search_outcome(
+    runner: TrialRunner,
+    requirement: Requirement,
+    settings: SearchSettings,
+    test_id: str,
+    warm_start: tuple[float | None, float | None] | None = None,
+) -> Outcome:
+    """Run the boundary search of ``requirement`` with ``runner`` and describe what it found."""
+    result = run_search(runner, requirement, settings, warm_start)
     verdict = "flaky" if result.flaky else "passed" if result.edge_passed else "failed"
-    boundary = Boundary(result.pass_value, result.fail_value, ref.unit)
+    boundary = Boundary(result.pass_value, result.fail_value, runner.ref.unit)
     trials = [point.info for point in result.trials]
     return _outcome(runner, requirement, test_id, verdict, boundary, result.termination, trials, result.contradictions)
 
@@ -163,9 +196,11 @@ def failure_message(outcome: Outcome) -> str:
         lines.append(
             f"  at {outcome.parameter} = {first.value:g}{unit}: {_metrics_text(first.metrics, judged)}; failed: {', '.join(first.failed)}"
         )
+    speculative = sum(t.speculative for t in outcome.trials)
+    trials = f"{len(outcome.trials)} trials" + (f" ({speculative} speculative)" if speculative else "")
     lines.append(
-        f"  boundary: {outcome.parameter} {outcome.boundary.text()} ({len(outcome.trials)} trials, {outcome.runs} runs, "
-        f"{outcome.termination}); {outcome.confidence()}"
+        f"  boundary: {outcome.parameter} {outcome.boundary.text()} ({trials}, {outcome.runs} runs, {outcome.termination}); "
+        f"{outcome.confidence()}"
     )
     for label, trial in zip(("pass end", "fail end"), outcome.end_trials()):
         if trial is not None:
