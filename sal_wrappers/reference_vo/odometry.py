@@ -72,13 +72,6 @@ class Odometry:
         self.prev_grey: np.ndarray | None = None
         self.init: dict[str, Any] | None = None
 
-    @property
-    def pending(self) -> int | None:
-        """Position of the first frame whose state may still change, or ``None`` when every
-        frame stepped has its final state: a mono start tracks its reference frame and the
-        frames after it once it triangulates the first map, so they are not final before."""
-        return None if self.started or self.init is None else int(self.init["pos"])
-
     # -- per frame --------------------------------------------------------------------------
     def step(self, pos: int, t: float, image: np.ndarray, right: np.ndarray | None, depth: np.ndarray | None) -> list[Update]:
         self.frame += 1

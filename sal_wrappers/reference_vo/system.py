@@ -231,12 +231,21 @@ def _track_frames(sequence: Sequence, mode: str, odometry: Odometry, log: TextIO
             log.write(
                 f"{p} {sequence.records[p].timestamp:.6f} {TrackState(state).name.lower()} {inliers} {ms if p == pos else 0:.1f}{note}\n"
             )
-        if loop.stop is not None and done < len(loop.states):  # after the last frame there is nothing left to save
-            settled = done if odometry.pending is None else odometry.pending
-            if (stopped := loop.stop(loop.states[:settled], len(loop.states))) is not None:
-                log.write(f"# stopped after frame {pos}: {stopped}\n")
-                return None, stopped, done, track_time
+        stopped = _stop_reason(loop, odometry, done)
+        if stopped is not None:
+            log.write(f"# stopped after frame {pos}: {stopped}\n")
+            return None, stopped, done, track_time
     return failure, None, done, track_time
+
+
+def _stop_reason(loop: _Loop, odometry: Odometry, done: int) -> str | None:
+    """What ``loop.stop`` says after ``done`` frames (never after the last one: nothing is left
+    to save), given the states that are final: all frames done, except before a mono map exists
+    the start's reference frame and those after it, which the first map may still track."""
+    if loop.stop is None or done >= len(loop.states):
+        return None
+    settled = done if odometry.started or odometry.init is None else int(odometry.init["pos"])
+    return loop.stop(loop.states[:settled], len(loop.states))
 
 
 def source_files() -> list[Path]:
