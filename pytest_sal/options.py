@@ -80,6 +80,16 @@ OPTIONS: tuple[tuple[str, dict[str, Any]], ...] = (
         ),
     ),
     (
+        "--sal-no-early-stop",
+        dict(
+            dest="sal_no_early_stop",
+            action="store_true",
+            default=False,
+            help="run every SLAM run to its last frame, even once its requirement can no longer hold "
+            "(ini sal_early_stop = false). Default: stop it early",
+        ),
+    ),
+    (
         "--sal-history-dir",
         dict(
             dest="sal_history_dir",
@@ -187,6 +197,12 @@ INI_KEYS: tuple[tuple[str, str, str | None], ...] = (
         "auto",
     ),
     ("sal_seed", "perturbation seed (default 0)", "0"),
+    (
+        "sal_early_stop",
+        "true or false: stop a SLAM run once its requirement can no longer hold, e.g. tracking_rate >= 0.9 "
+        "with 15 of 140 frames lost (default true)",
+        "true",
+    ),
     ("sal_timeout", "seconds per SLAM run before it is killed (default 600)", "600"),
     ("sal_system", "default system: orbslam3 when installed, else reference_vo", None),
     ("sal_executor", "where SLAM runs happen: local or ray (default local)", "local"),
@@ -232,6 +248,8 @@ class SalOptions:
             the ``--sal-compare-fail`` checks and what a test without a baseline does.
         runs, seed, timeout: the most runs per trial (``None``: auto), the perturbation seed and
             the seconds per SLAM run.
+        early_stop: stop a run once its requirement can no longer hold (``--sal-no-early-stop``,
+            ini ``sal_early_stop``).
         system_name: ini ``sal_system`` (``None``: the default system).
         kitti_segments: segment lengths (m) of ``t_rel`` / ``r_rel``.
         search: the default tolerance and trial budget of a boundary search.
@@ -254,6 +272,7 @@ class SalOptions:
     runs: int | None
     seed: int
     timeout: float
+    early_stop: bool
     system_name: str | None
     kitti_segments: tuple[float, ...]
     search: SearchSettings
@@ -290,6 +309,7 @@ def read_options(config: pytest.Config) -> SalOptions:
         runs=None if str(config.getini("sal_runs")).strip() == "auto" else int(_ini_number(config, "sal_runs")),
         seed=int(_ini_number(config, "sal_seed")),
         timeout=_ini_number(config, "sal_timeout"),
+        early_stop=not option.sal_no_early_stop and _ini_bool(config, "sal_early_stop"),
         system_name=config.getini("sal_system") or None,
         kitti_segments=_ini_segments(config),
         search=SearchSettings(tolerance_pct=_ini_number(config, "sal_tolerance"), max_trials=int(_ini_number(config, "sal_max_trials"))),
@@ -365,6 +385,15 @@ def _ini_number(config: pytest.Config, name: str) -> float:
     if value is None or not math.isfinite(value) or value < smallest or (exclusive and value == smallest):
         raise pytest.UsageError(f"pytest-sal: ini option {name} = {text!r}: expected {what}")
     return float(value) if kind is float else int(value)
+
+
+def _ini_bool(config: pytest.Config, name: str) -> bool:
+    """The ini key ``name`` as true or false (also yes/no, on/off, 1/0), or a usage error that names it."""
+    text = str(config.getini(name)).strip()
+    value = {"true": True, "yes": True, "on": True, "1": True, "false": False, "no": False, "off": False, "0": False}.get(text.lower())
+    if value is None:
+        raise pytest.UsageError(f"pytest-sal: ini option {name} = {text!r}: expected true or false")
+    return value
 
 
 def _ini_segments(config: pytest.Config) -> tuple[float, ...]:

@@ -136,6 +136,7 @@ class SalSession:
             artifacts=bool(self.options.report_html or getattr(self.config.option, "htmlpath", None)),  # ours or pytest-html's
             cache_frames=self.options.cache_frames,
             kitti_segments=self.options.kitti_segments,
+            early_stop=self.options.early_stop,
             progress=trial_printer(self.config, item.nodeid, ref.label, ref.unit, metrics),
             executor=self.executor,
         )

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from sal_adapters import Sequence
-from sal_wrappers.base import RunResult, SlamSystem, TrackState
+from sal_wrappers.base import RunResult, SlamSystem, StopCheck, TrackState
 
 __all__ = ["FakeSlam", "SleepySlam", "applied_value"]
 
@@ -66,7 +66,8 @@ class FakeSlam(SlamSystem):
     def options(self) -> dict[str, Any]:
         return {"parameter": self.parameter, "tracked": self.tracked, "flaky": self.flaky}
 
-    def run(self, sequence: Sequence, workdir: Path, timeout: float | None = None) -> RunResult:
+    def run(self, sequence: Sequence, workdir: Path, timeout: float | None = None, stop: StopCheck | None = None) -> RunResult:
+        """Track the share of the frames (see the class text); ``stop`` is ignored (not ``stoppable``)."""
         start = time.perf_counter()
         value = applied_value(sequence, self.parameter)
         share = 1.0 if value is None else float(np.clip(self._share(value), 0.0, 1.0))

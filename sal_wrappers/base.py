@@ -13,6 +13,7 @@ import enum
 import hashlib
 import json
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
@@ -22,11 +23,16 @@ import numpy as np
 from sal_adapters import Sequence, Trajectory
 from sal_adapters.errors import SalError
 
-__all__ = ["WRITTEN_BEFORE_FAILURE", "RunResult", "SlamSystem", "SlamSystemError", "TrackState", "file_sha256"]
+__all__ = ["WRITTEN_BEFORE_FAILURE", "RunResult", "SlamSystem", "SlamSystemError", "StopCheck", "TrackState", "file_sha256"]
 
 #: ``RunResult.info`` key: the system wrote its whole result before it failed (a crash at
 #: shutdown); the run is scored all the same and keeps its ``failure``.
 WRITTEN_BEFORE_FAILURE = "written_before_failure"
+
+#: ``SlamSystem.run``'s ``stop``: called with the ``TrackState`` values (int8) of the first
+#: frames, those whose state is final so far, and the number of frames given; a reason (text)
+#: stops the run there, ``None`` lets it go on (``pytest_sal.engine.early_stop.StopRule``).
+StopCheck = Callable[[np.ndarray, int], "str | None"]
 
 
 class SlamSystemError(SalError):
@@ -69,7 +75,12 @@ class RunResult:
         exit_status: exit status of the child process (negative: killed by that signal),
             ``None`` for an in-process run.
         failure: why the run failed (crash, exit status, timeout, nothing tracked); ``None``
-            when it ran to the end.
+            when it ran to the end or was stopped.
+        stopped: why the run was stopped before its last frame (its ``stop`` said the
+            requirement could no longer hold), else ``None``. Stopping is not a failure
+            (``failure`` stays ``None``); ``states`` still cover every frame, those not run
+            counting as not tracked (``NOT_INITIALISED`` before the first tracked frame, ``LOST``
+            after), so ``tracking_rate`` is at most the full run's.
         log_path: the run's log file (the system's own output), when there is one.
         log_tail: the last lines of that log (kept for messages when the file is gone).
         info: anything else the system reports (settings file, vocabulary, options);
@@ -101,6 +112,7 @@ class RunResult:
     info: dict[str, Any] = field(default_factory=dict)
     load: dict[str, Any] = field(default_factory=dict)
     fell_behind: bool = False
+    stopped: str | None = None
 
     def __post_init__(self) -> None:
         t = np.asarray(self.timestamps, dtype=np.float64).reshape(-1)
@@ -112,7 +124,7 @@ class RunResult:
 
     @property
     def ok(self) -> bool:
-        """The run ran to the end (it may still have tracked badly)."""
+        """The run did not fail: it ran to the end or was stopped (it may still have tracked badly)."""
         return self.failure is None
 
     @property
@@ -148,6 +160,7 @@ class RunResult:
             text += f"; STARVED: fell behind the sensor clock ({self.load.get('fell_behind_reason')}){again}"
         elif len(attempts) > 1:
             text += f"; fell behind the sensor clock ({attempts[0]['load'].get('fell_behind_reason')}); re-paced at {pace:g}x"
+        text += f"; STOPPED early: {self.stopped}" if self.stopped else ""
         return text + (f"; FAILED: {self.failure}" if self.failure else "")
 
     # -- persistence (cache entries, child-process results) ------------------------------------
@@ -178,11 +191,13 @@ class RunResult:
             "info": self.info,
             "load": self.load,
             "fell_behind": self.fell_behind,
+            "stopped": self.stopped,
         }
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> RunResult:
-        """Inverse of ``to_dict``."""
+        """Inverse of ``to_dict`` (a dictionary of an older version lacks the newer fields:
+        ``load``, ``fell_behind``, ``stopped`` take their defaults)."""
 
         def trajectory(rows: list[list[float]] | None) -> Trajectory | None:
             if rows is None:
@@ -225,6 +240,9 @@ class SlamSystem:
     #: the same input gives the same result every run (one run per trial is enough); a noisy
     #: system (threads, RANSAC) gets a vote of several runs per trial
     deterministic: ClassVar[bool] = False
+    #: ``run`` takes a ``stop`` and stops the run when it says so; a system that cannot stop
+    #: (``command``: it runs the whole program) leaves it ``False`` and is never given one
+    stoppable: ClassVar[bool] = False
 
     def options(self) -> dict[str, Any]:
         """The configured options (JSON-ready)."""
@@ -258,10 +276,14 @@ class SlamSystem:
             raise SlamSystemError(f"{self.name}: sequence {sequence.name!r} is {sequence.sensor}, it cannot run in {mode!r} mode")
         return mode
 
-    def run(self, sequence: Sequence, workdir: Path, timeout: float | None = None) -> RunResult:
+    def run(self, sequence: Sequence, workdir: Path, timeout: float | None = None, stop: StopCheck | None = None) -> RunResult:
         """Run on ``sequence``; write logs and files under ``workdir``; give up after
         ``timeout`` seconds (``None``: no limit). Failures of the system come back in the
-        result, never as an exception."""
+        result, never as an exception.
+
+        ``stop`` (only given to a ``stoppable`` system): asked as frames get their final state;
+        when it gives a reason the run ends there, with ``RunResult.stopped`` set to it (see
+        ``StopCheck``). A system that tracks in a child process calls it there, so it must pickle."""
         raise NotImplementedError
 
     def __repr__(self) -> str:

@@ -57,7 +57,7 @@ from sal_adapters import Sequence, Trajectory, write_sequence
 from sal_adapters.errors import DatasetError
 from sal_adapters.textfiles import atomic_write_text, format_float
 from sal_adapters.trajectory import seconds_to_ns
-from sal_wrappers.base import WRITTEN_BEFORE_FAILURE, RunResult, SlamSystem, SlamSystemError, TrackState
+from sal_wrappers.base import WRITTEN_BEFORE_FAILURE, RunResult, SlamSystem, SlamSystemError, StopCheck, TrackState
 from sal_wrappers.child_process import describe_exit, log_tail
 from sal_wrappers.command_files import file_digest, program_files, tree_digest
 from sal_wrappers.command_options import LAYOUT_SENSORS, LOG_NAME, SENSORS, parse_command_options
@@ -152,9 +152,11 @@ class CommandSystem(SlamSystem):
         return {**super().identity(), "system": "command", "files": files}
 
     # -- running -------------------------------------------------------------------------------
-    def run(self, sequence: Sequence, workdir: Path, timeout: float | None = None) -> RunResult:
+    def run(self, sequence: Sequence, workdir: Path, timeout: float | None = None, stop: StopCheck | None = None) -> RunResult:
         """Stage ``sequence`` under ``workdir/<stage_dir>``, run the program (log: ``workdir/run.log``),
-        read its trajectory. Failures of the program come back in the result."""
+        read its trajectory. Failures of the program come back in the result. ``stop`` is
+        ignored: the program runs the whole sequence and its states are known only at its end
+        (the system is not ``stoppable``, so the trial runner gives it none)."""
         config = self.config
         mode = self.mode_for(sequence, config.sensor)
         workdir = Path(workdir).expanduser().resolve()

@@ -34,6 +34,10 @@ attempt is the result, ``info["attempts"]`` lists every attempt (pace, frames tr
 time, load figures) and ``RunResult.fell_behind`` is ``True`` only when the last attempt still
 fell behind: its tracking reflects a starved machine, not the system (``failure``, when set,
 says so too). Earlier attempts' logs are kept as ``orbslam3.attempt<N>.log``.
+
+Early stop: ``run``'s ``stop`` is asked in the child after every frame, so it must pickle. A
+stopped run ends cleanly (``stopped`` says why, ``failure`` stays ``None``, no final trajectory is
+saved); one that fell behind is re-paced like a full one, since its stop may be the machine's.
 """
 
 from __future__ import annotations
@@ -43,6 +47,7 @@ import importlib.metadata
 import importlib.util
 import math
 import os
+import pickle
 from pathlib import Path
 from typing import Any
 
@@ -50,7 +55,7 @@ import numpy as np
 
 from sal_adapters import Sequence, Trajectory
 from sal_adapters.cache_dir import user_cache_dir
-from sal_wrappers.base import WRITTEN_BEFORE_FAILURE, RunResult, SlamSystem, SlamSystemError, file_sha256
+from sal_wrappers.base import WRITTEN_BEFORE_FAILURE, RunResult, SlamSystem, SlamSystemError, StopCheck, file_sha256
 from sal_wrappers.child_process import ChildOutcome, run_child
 from sal_wrappers.orbslam3_child import ENTRY, frame_messages
 from sal_wrappers.orbslam3_settings import OrbParameters, write_settings
@@ -119,6 +124,7 @@ class OrbSlam3(SlamSystem):
     sensors = ("mono", "stereo", "rgbd")
     description = "ORB-SLAM3 (pyorbslam3 0.1.1): monocular, stereo or RGB-D visual SLAM, run in a child process"
     version = 1
+    stoppable = True
     #: test hook, not an option: seconds the child sleeps after each tracking call (simulates
     #: a machine that cannot keep up with the sensor clock)
     _stall_s: float = 0.0
@@ -210,15 +216,17 @@ class OrbSlam3(SlamSystem):
             return None
         return 1.0 if self.pace is True else float(self.pace)
 
-    def run(self, sequence: Sequence, workdir: Path, timeout: float | None = None) -> RunResult:
+    def run(self, sequence: Sequence, workdir: Path, timeout: float | None = None, stop: StopCheck | None = None) -> RunResult:
         """Run ORB-SLAM3 on ``sequence`` in a child process (see the module text); files go to
         ``workdir``: ``orbslam3_settings.yaml``, ``orbslam3.log``, ``final_trajectory_euroc.txt``.
 
-        ``timeout`` (s) covers each child run (attempt), vocabulary loading included. Raises
-        ``SlamSystemError`` when the sequence cannot run in the mode, and the vocabulary
+        ``timeout`` (s) covers each child run (attempt), vocabulary loading included; ``stop``
+        is asked in the child (see the module text). Raises ``SlamSystemError`` when the
+        sequence cannot run in the mode or ``stop`` does not pickle, and the vocabulary
         module's error when the default vocabulary cannot be built; everything ORB-SLAM3 does
         (exit, crash, hang, lost track) comes back in the result."""
         mode = self.mode_for(sequence, self.mode)
+        _check_picklable(stop)
         workdir = Path(workdir)
         workdir.mkdir(parents=True, exist_ok=True)
         if self.vocabulary is not None:
@@ -242,6 +250,8 @@ class OrbSlam3(SlamSystem):
             "sensor": mode,
             "pace": self.pace_factor,
             "final_path": str(final_path) if self.keep_final else None,
+            "stop": stop,
+            "frames": len(sequence),
         }
         if self._stall_s:
             header["stall_s"] = float(self._stall_s)
@@ -277,7 +287,8 @@ class OrbSlam3(SlamSystem):
             except (OSError, ValueError) as exc:
                 final_error = str(exc)
         phase = data.get("phase")
-        failure, partial, written = _failure(outcome, phase, len(reported), n, trajectory is not None)
+        stopped = data.get("stopped")
+        failure, partial, written = _failure(outcome, phase, len(reported), n, trajectory is not None or stopped is not None)
         track_times = np.asarray(data.get("track_times", []), dtype=np.float64)
         given = np.asarray(data.get("given", []), dtype=np.float64)
         load = load_figures(timestamps[: len(given)], given, track_times, header.get("pace"), data.get("usage")) if len(given) else {}
@@ -319,12 +330,22 @@ class OrbSlam3(SlamSystem):
             track_time_s=float(track_times.sum()) if len(track_times) else None,
             exit_status=outcome.exit_status,
             failure=failure,
+            stopped=stopped,
             log_path=outcome.log_path,
             log_tail=outcome.log_tail,
             info=info,
             load=load,
             fell_behind=bool(load.get("fell_behind")),
         )
+
+
+def _check_picklable(stop: StopCheck | None) -> None:
+    """``SlamSystemError`` when ``stop`` cannot go to the child process (it does not pickle)."""
+    try:
+        pickle.dumps(stop)
+    except Exception as exc:
+        hint = "give a picklable one: a StopRule or a module-level function"
+        raise SlamSystemError(f"orbslam3: stop={stop!r} cannot be sent to the child process that tracks ({exc}); {hint}") from None
 
 
 def _largest_segment(ids: np.ndarray, poses: list[Any], timestamps: np.ndarray) -> tuple[Trajectory | None, list[int]]:
@@ -342,7 +363,8 @@ def _largest_segment(ids: np.ndarray, poses: list[Any], timestamps: np.ndarray) 
 def _failure(outcome: ChildOutcome, phase: str | None, reported: int, n: int, tracked: bool) -> tuple[str | None, bool, bool]:
     """``(failure, partial, written)``: how the run failed in words, with the phase it failed
     in and what was kept; whether per-frame results of an unfinished child are kept
-    (``partial``); whether they cover every frame of a crash after the last one (``written``)."""
+    (``partial``); whether they cover every frame of a crash after the last one (``written``);
+    ``tracked``: a frame was tracked, or the run was stopped (not a failure)."""
     failure = outcome.failure
     partial = failure is not None and reported > 0
     if failure is None and not tracked:
@@ -368,6 +390,7 @@ def _attempt(result: RunResult) -> dict[str, Any]:
         "maps": result.maps,
         "wall_time_s": round(result.wall_time_s, 3),
         "failure": result.failure,
+        "stopped": result.stopped,
         "fell_behind": bool(result.load.get("fell_behind")),
         "load": result.load,
     }

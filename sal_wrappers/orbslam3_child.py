@@ -5,6 +5,12 @@ tracks every frame (paced to the sensor clock when asked), shuts down and saves 
 trajectory. It writes its per-frame record (ORB-SLAM3 states, ``pose_wc`` of tracked frames,
 tracking times, when each frame was given, CPU usage) about once a second and before each
 step that may crash, so a crash or a timeout still leaves what was tracked.
+
+Early stop: the header's ``stop`` (a ``StopCheck``, unpickled here) is asked after each frame
+with the ``TrackState`` of every frame so far (ORB-SLAM3 reports a frame's state once, so each
+is final) and the header's ``frames``. When it gives a reason the child tracks no more frames,
+records it as ``stopped``, shuts down and saves no final trajectory (that of a partial run);
+the parent's further frames then meet a closed pipe.
 """
 
 from __future__ import annotations
@@ -18,8 +24,9 @@ from typing import Any
 import numpy as np
 
 from sal_adapters import Sequence
+from sal_wrappers.base import StopCheck, TrackState
 from sal_wrappers.child_process import write_result
-from sal_wrappers.orbslam3_states import TRACKED
+from sal_wrappers.orbslam3_states import TRACKED, track_state
 from sal_wrappers.pacing import process_usage
 
 __all__ = ["ENTRY", "frame_messages", "track"]
@@ -74,7 +81,7 @@ def track(header: dict[str, Any], frames: Iterator[dict[str, Any]], result_path:
     write_result(result_path, record)
     slam.shutdown()
     final_path = header.get("final_path")
-    if final_path and any(s in TRACKED for s in record["raw_states"]):
+    if final_path and not record.get("stopped") and any(s in TRACKED for s in record["raw_states"]):
         record["phase"] = "saving"
         write_result(result_path, record)
         slam.save_trajectory_euroc(str(final_path))
@@ -87,7 +94,9 @@ def _track_frames(
     slam: Any, header: dict[str, Any], frames: Iterator[dict[str, Any]], record: dict[str, Any], result_path: Path, usage: _LoopUsage
 ) -> None:
     """Give every frame to ``slam`` (no earlier than the sensor clock at ``header["pace"]``
-    allows) and append its results to ``record``, written about once a second."""
+    allows) and append its results to ``record``, written about once a second; stop early
+    when the header's ``stop`` says so (``record["stopped"]``: why)."""
+    stop = _StopWatch(header["stop"], int(header["frames"])) if header.get("stop") is not None else None
     pace = header.get("pace")
     mode = header["sensor"]
     stall = float(header.get("stall_s") or 0.0)
@@ -115,10 +124,32 @@ def _track_frames(
         record["raw_states"].append(state)
         record["poses"].append(np.asarray(result.pose_wc, dtype=np.float64).ravel().tolist() if state in TRACKED else None)
         record["points"].append(int(result.num_tracked_points))
+        if stop is not None and (stopped := stop.after(state)) is not None:
+            record["stopped"] = stopped
+            break
         if time.perf_counter() - last_flush > _FLUSH_INTERVAL_S:
             record["usage"] = usage.figures()
             write_result(result_path, record)
             last_flush = time.perf_counter()
+
+
+class _StopWatch:
+    """The run's ``stop`` asked frame by frame, with the ``TrackState`` of every frame so far."""
+
+    def __init__(self, stop: StopCheck, frames: int) -> None:
+        self.stop, self.frames = stop, frames
+        self.states = np.zeros(frames, dtype=np.int8)
+        self.done, self.tracked = 0, False
+
+    def after(self, state: int) -> str | None:
+        """Record the next frame's ORB-SLAM3 ``state``; why to stop, or ``None`` (never after
+        the last frame: nothing is left to save)."""
+        mapped = track_state(state, self.tracked)
+        self.tracked = self.tracked or mapped == TrackState.OK
+        if self.done < self.frames:
+            self.states[self.done] = mapped
+        self.done += 1
+        return self.stop(self.states[: self.done], self.frames) if self.done < self.frames else None
 
 
 class _LoopUsage:

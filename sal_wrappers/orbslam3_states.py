@@ -24,7 +24,7 @@ import numpy as np
 from sal_adapters import Trajectory
 from sal_wrappers.base import TrackState
 
-__all__ = ["ORB_STATES", "TRACKED", "map_states", "read_final_trajectory", "segment_ids", "state_name"]
+__all__ = ["ORB_STATES", "TRACKED", "map_states", "read_final_trajectory", "segment_ids", "state_name", "track_state"]
 
 #: ORB-SLAM3 ``TrackingState`` values by name (pyorbslam3 0.1.1).
 ORB_STATES: dict[str, int] = {
@@ -47,17 +47,21 @@ def state_name(state: int) -> str:
     return _NAMES.get(state, str(state))
 
 
+def track_state(state: int | None, tracked_before: bool) -> TrackState:
+    """``TrackState`` of one frame from its ORB-SLAM3 state (``None``: not reported) and
+    whether an earlier frame was tracked; see the module text for the rule."""
+    if state in TRACKED:
+        return TrackState.OK
+    return TrackState.LOST if tracked_before else TrackState.NOT_INITIALISED
+
+
 def map_states(raw: list[int | None]) -> np.ndarray:
-    """``TrackState`` per frame (int8) from ORB-SLAM3 states (``None``: not reported); see the
-    module text for the rule."""
+    """``TrackState`` per frame (int8) from ORB-SLAM3 states (``None``: not reported)."""
     out = np.empty(len(raw), dtype=np.int8)
     tracked = False
     for i, state in enumerate(raw):
-        if state in TRACKED:
-            tracked = True
-            out[i] = TrackState.OK
-        else:
-            out[i] = TrackState.LOST if tracked else TrackState.NOT_INITIALISED
+        out[i] = track_state(state, tracked)
+        tracked = tracked or out[i] == TrackState.OK
     return out
 
 

@@ -37,6 +37,7 @@ SLOW_MODULES = {
     "test_experiment_e2e.py",  # end-to-end experiments: perturb, evaluate, features (~70 s)
     "test_experiment_e2e_boundary.py",  # boundary searches with both real systems (~55 s)
     "test_experiment_fuzz.py",  # the config fuzz test, hundreds of generated and mutated configs (~45 s)
+    "test_early_stop_real.py",  # reference_vo on KITTI 07 and EuRoC at night, stopped and full (18 s; test_early_stop.py stays)
 }
 #: Single tests marked ``slow`` in otherwise fast modules, as ``module::name`` (``module::Class::name``
 #: in a class) patterns: ``*`` matches any text, and a name without its parameter ids matches
@@ -89,6 +90,7 @@ REAL_SLAM_TESTS = {
     "test_experiment_e2e.py::TestEvaluateOrbslam3::*",  # sal evaluate --slam orbslam3
     "test_experiment_e2e_boundary.py::TestBoundaryOrbslam3::*",  # sal boundary --slam orbslam3
     "test_plugin_orbslam3.py::*",  # a boundary search through the plugin (~55 s)
+    "test_early_stop_orbslam3.py::*",  # stopped and full runs on KITTI 07 and EuRoC (30 s, and 9 s to build the vocabulary)
 }
 
 

@@ -126,9 +126,17 @@ def sal(config: Path, args: list[str], keep: tuple[str, ...] = ()) -> Command:
         for name in SYSTEM_NAMES:
             cls = SYSTEMS.get(name)
 
-            def spy(self: Any, sequence: Any, workdir: Path, timeout: float | None = None, _real: Any = cls.run, _name: str = name) -> Any:
+            def spy(
+                self: Any,
+                sequence: Any,
+                workdir: Path,
+                timeout: float | None = None,
+                stop: Any = None,
+                _real: Any = cls.run,
+                _name: str = name,
+            ) -> Any:
                 calls.append((_name, sequence.name))
-                return _real(self, sequence, workdir, timeout=timeout)
+                return _real(self, sequence, workdir, timeout=timeout, stop=stop)
 
             patch.setattr(cls, "run", spy)
         status = main(args)

@@ -3,7 +3,7 @@ happens (this process, or a Ray worker on another machine), and what comes back.
 
 ``RunJob`` holds everything the run needs and nothing of the session: the clean sequence
 (pickled as its frame sources: image paths, or the synthetic world's class and seed), the
-perturbation configured at the trial's severity, the seed, the system, the timeout. ``run_job`` perturbs the
+perturbation configured at the trial's severity, the seed, the system, the timeout, the stop rule. ``run_job`` perturbs the
 sequence where it runs, runs the system (which keeps its own crash isolation: a segfault or a
 timeout is a failed run, never an exception) and scores the trajectory with evo. It returns a
 ``RunOutput``: the run record the cache stores, the whole ``RunResult`` (states, trajectory,
@@ -25,6 +25,7 @@ import cv2
 import numpy as np
 
 from pytest_sal.analysis.metrics import evaluate
+from pytest_sal.engine.early_stop import StopRule
 from pytest_sal.engine.outcome import TRIAL_METRICS
 from pytest_sal.store.trial_cache import ContentCache
 from sal_adapters import Sequence
@@ -39,7 +40,8 @@ class RunJob:
     """One run: the system on the dataset perturbed by ``module``.
 
     Attributes:
-        key: the run's cache key (names its work folder and its artefacts).
+        key: the run's cache key, the stop key when ``stop`` is given (names its work folder and
+            its artefacts).
         number: the run's number within its trial (0 for the first).
         value: the severity, in the searched parameter's unit (recorded with the run).
         label: what ``value`` is, for the plot title: ``fog.visibility_m = 30 m``.
@@ -54,6 +56,8 @@ class RunJob:
         artifacts: make the report images (an example frame, a trajectory plot).
         frames_cache: write the perturbed sequence once into this cache folder and run the
             system on the copy read back (``--sal-cache-frames``), or ``None``.
+        stop: stop the run once the requirement can no longer hold (given to a ``stoppable``
+            system only), or ``None``: run every frame.
     """
 
     key: str
@@ -69,6 +73,7 @@ class RunJob:
     kitti_segments: tuple[float, ...]
     artifacts: bool = False
     frames_cache: Path | None = None
+    stop: StopRule | None = None
 
 
 @dataclass
@@ -76,8 +81,9 @@ class RunOutput:
     """What a run gives back.
 
     Attributes:
-        record: the run record the cache stores: ``value``, ``module``, ``metrics`` and, when
-            the machine decided a failure, ``not_cached`` (why it must not be stored).
+        record: the run record the cache stores: ``value``, ``module``, ``metrics`` (with
+            ``stopped``, why, when the run was stopped early) and, when the machine decided a
+            failure, ``not_cached`` (why it must not be stored).
         result: the system's ``RunResult.to_dict()`` (states, trajectory, failure, log tail).
         images: report images by name (``frame``, ``trajectory``), PNG bytes.
         worker: where it ran (``host:pid``).
@@ -101,8 +107,9 @@ def run_job(job: RunJob) -> RunOutput:
         perturbed = cached_sequence(perturbed, ContentCache(job.frames_cache))
     groundtruth = perturbed.groundtruth
     load = machine_load()
+    stop = {"stop": job.stop} if job.stop is not None and job.system.stoppable else {}  # others never take one
     try:
-        result = job.system.run(perturbed, job.workdir / f"{job.key[:12]}-run{job.number}", timeout=job.timeout)
+        result = job.system.run(perturbed, job.workdir / f"{job.key[:12]}-run{job.number}", timeout=job.timeout, **stop)
     except MemoryError:
         states = np.full(len(perturbed), TrackState.NOT_INITIALISED, dtype=np.int8)
         result = RunResult(
@@ -121,6 +128,8 @@ def run_job(job: RunJob) -> RunOutput:
     metrics["wall_time_s"] = result.wall_time_s
     metrics["starved"] = result.fell_behind  # the machine could not feed it even re-paced
     metrics["load"] = result.load
+    if result.stopped is not None:
+        metrics["stopped"] = result.stopped
     images: dict[str, bytes] = {}
     if job.artifacts:
         if scored.ate is not None and groundtruth is not None:

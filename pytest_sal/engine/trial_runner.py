@@ -17,6 +17,14 @@ run whose record lacks what the judge reads (``run_record_problem``) is discarde
 A run whose failure the machine decided (``run_job.machine_failure``: a timeout on a starved or
 oversubscribed machine, out of memory) counts in this session and is not stored, so the next
 session runs it again; its run says why under ``not_cached``.
+
+Early stop (``early_stop``, on by default): a ``stoppable`` system is given the requirement's
+``StopRule`` and stops a run once a criterion can no longer hold; the run's metrics say why
+under ``stopped`` and its verdict is the full run's (failed). A stopped record is valid only
+for requirements whose rule stops it, so the cache keeps it apart: a run looks up its full key
+(a run that finished serves every requirement), then the key with the rule's criteria
+(``key(value, number, stop=rule)``); a run that finishes is stored under the full key, a
+stopped one under the rule's. Keys of full runs are those without early stop.
 """
 
 from __future__ import annotations
@@ -36,6 +44,7 @@ import cv2
 import numpy as np
 
 from pytest_sal.analysis.kitti_metrics import KITTI_SEGMENTS_M
+from pytest_sal.engine.early_stop import StopRule
 from pytest_sal.engine.executor import Executor, LocalExecutor
 from pytest_sal.engine.outcome import TRIAL_METRICS, Trial, TrialMetrics
 from pytest_sal.engine.requirements import Requirement
@@ -173,6 +182,8 @@ class TrialRunner:
         kitti_segments: segment lengths (m) of ``t_rel`` / ``r_rel`` (ini ``sal_kitti_segments``).
         executor: where runs that are not cached happen (``LocalExecutor``: here, one at a
             time); runs of one vote go to it together, up to ``executor.slots(system)``.
+        early_stop: stop a run of a ``stoppable`` system once the requirement can no longer
+            hold (``StopRule``; see the module text); ``False``: every run runs every frame.
     """
 
     dataset: Sequence
@@ -189,13 +200,18 @@ class TrialRunner:
     progress: Callable[[Trial], None] | None = None
     kitti_segments: tuple[float, ...] = KITTI_SEGMENTS_M
     executor: Executor = field(default_factory=LocalExecutor)
+    early_stop: bool = True
 
     def __post_init__(self) -> None:
         self.policy = VotePolicy.for_system(self.system, self.runs)
         self._progress_lock = threading.Lock()
+        stoppable = self.early_stop and self.system.stoppable
+        #: what stops this requirement's runs early (``None``: they run every frame)
+        self.stop_rule = StopRule.of(self.requirement) if stoppable else None
 
-    def key(self, value: float, number: int = 0) -> str:
-        """Cache key of run ``number`` at ``value``."""
+    def key(self, value: float, number: int = 0, stop: StopRule | None = None) -> str:
+        """Cache key of run ``number`` at ``value``; with ``stop``, of the run stopped by that rule."""
+        parts: dict[str, Any] = {} if stop is None else {"stop": stop.key()}
         return cache_key(
             runner=RUNNER_VERSION,
             dataset=self.dataset.fingerprint,
@@ -204,6 +220,7 @@ class TrialRunner:
             system=self.system.identity(),
             run=number,
             kitti_segments_m=self.kitti_segments,
+            **parts,
         )
 
     def unchanged_frames(self, value: float) -> list[int] | None:
@@ -279,15 +296,46 @@ class TrialRunner:
     def _cached_run(self, value: float, number: int) -> tuple[dict[str, Any], bool]:
         """``(record, was_cached)`` of run ``number`` at ``value``: read from the cache, or run by
         the executor and stored (unless the machine decided its failure)."""
-        key = self.key(value, number)
+        key, rule = self.key(value, number), self.stop_rule
         if self.cache is None:
-            return self._execute(value, key, number), False
-        compute = functools.partial(self._execute, value, key, number)
-        return self.cache.compute(key, compute, check=run_record_problem, transient=_not_cached)
+            return self._execute(value, key if rule is None else self.key(value, number, rule), number, rule), False
+        if rule is None:
+            compute = functools.partial(self._execute, value, key, number, None)
+            return self.cache.compute(key, compute, check=run_record_problem, transient=_not_cached)
+        full = self.cache.get(key, check=run_record_problem)
+        if full is not None:
+            return full, True
+        return self._stoppable_run(value, number, key, rule)
 
-    def _execute(self, value: float, key: str, number: int) -> dict[str, Any]:
-        """Run ``number`` at ``value`` on the executor; its report images (first run of a trial)
-        are written here, on the controller, under the cache's ``artifacts`` folder."""
+    def _stoppable_run(self, value: float, number: int, key: str, rule: StopRule) -> tuple[dict[str, Any], bool]:
+        """``(record, was_cached)`` of a run ``rule`` may stop, under the lock of its stop key: read
+        back (stopped, or finished while this waited for the lock), or run; a finished run is
+        stored under the full ``key``, a stopped one under the stop key (see the module text)."""
+        cache = self.cache
+        assert cache is not None  # only called with a cache
+        read_back: list[bool] = []
+
+        def run() -> dict[str, Any]:
+            full = cache.get(key, check=run_record_problem)
+            if full is not None:
+                read_back.append(True)
+                return full
+            data = self._execute(value, stop_key, number, rule)
+            if "stopped" not in data["metrics"] and _not_cached(data) is None:
+                cache.put(key, data)
+            return data
+
+        def kept_apart(data: dict[str, Any]) -> str | None:
+            return _not_cached(data) or (None if "stopped" in data["metrics"] else "it finished: stored under its full key")
+
+        stop_key = self.key(value, number, rule)
+        data, cached = cache.compute(stop_key, run, check=run_record_problem, transient=kept_apart)
+        return data, cached or bool(read_back)
+
+    def _execute(self, value: float, key: str, number: int, stop: StopRule | None) -> dict[str, Any]:
+        """Run ``number`` at ``value`` on the executor (stopped early by ``stop``); its report
+        images (first run of a trial) are written here, on the controller, under the cache's
+        ``artifacts`` folder, named by ``key``."""
         job = RunJob(
             key=key,
             number=number,
@@ -302,6 +350,7 @@ class TrialRunner:
             kitti_segments=self.kitti_segments,
             artifacts=self.artifacts and self.cache is not None and number == 0,
             frames_cache=self.cache.root if self.cache_frames and self.cache is not None else None,
+            stop=stop,
         )
         folder = self.cache.root / "artifacts" if job.artifacts and self.cache is not None else None
         return store_artifacts(self.executor.run(job), folder, key)

@@ -95,9 +95,17 @@ def trial_line(trial: Trial, parameter: str, unit: str, metrics: Sequence[str]) 
     """One trial as text: ``fog.visibility_m = 25 m: pass  tracking_rate 0.65, ate_rmse 0.0123 m
     0.4 s (cached)``: the value with its unit, the verdict (``FAIL`` in capitals; the runs'
     votes when more than one ran), the median ``metrics`` named (with their units), the
-    seconds spent on the trial (``Trial.wall_time_s``), ``(cached)`` when no run was made and
-    ``(speculative)`` when a parallel search evaluated it beside its path."""
+    seconds spent on the trial (``Trial.wall_time_s``), ``(cached)`` when no run was made,
+    ``(speculative)`` when a parallel search evaluated it beside its path and, when runs were
+    stopped early, why the first was (``stopped early (2 of 3 runs): ...``): their metrics cover
+    the frames they ran."""
     votes = f" ({trial.votes()})" if len(trial.runs) > 1 else ""
     notes = (" (cached)" if trial.cached else "") + (" (speculative)" if trial.speculative else "")
     shown = metrics_text(trial.metrics, metrics)
-    return f"{parameter} = {with_unit(trial.value, unit, digits=6)}: {'pass' if trial.passed else 'FAIL'}{votes}  {shown}  {trial.wall_time_s:.1f} s{notes}"
+    stopped = [run["stopped"] for run in trial.runs if run.get("stopped")]
+    count = f" ({len(stopped)} of {len(trial.runs)} runs)" if len(trial.runs) > 1 else ""
+    early = f"  stopped early{count}: {stopped[0]}" if stopped else ""
+    return (
+        f"{parameter} = {with_unit(trial.value, unit, digits=6)}: {'pass' if trial.passed else 'FAIL'}{votes}  {shown}  "
+        f"{trial.wall_time_s:.1f} s{notes}{early}"
+    )

@@ -25,6 +25,11 @@ again on the next frames: a new map segment (``maps``), whose first frame is at 
 The scored trajectory (``scored="online"``) is the segment with the most tracked frames, as
 camera-to-world poses of the (raw, left) camera in that segment's first camera frame.
 
+Early stop: ``run``'s ``stop`` is asked after every frame with the states that are final
+(all frames stepped, except, before a mono map exists, the reference frame and those after it,
+which the first map may still track); when it gives a reason the run ends there and the
+frames not run count as not tracked (``RunResult.stopped``).
+
 Results are identical run to run and whatever the number of threads. A run never raises for
 a failure of its own (an exception becomes ``failure``, so does the timeout); it raises
 ``SlamSystemError`` for a mode the sequence cannot give, and lets errors decoding the frames
@@ -37,6 +42,7 @@ from __future__ import annotations
 import time
 import traceback
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -44,7 +50,7 @@ import cv2
 import numpy as np
 
 from sal_adapters import Sequence, Trajectory
-from sal_wrappers.base import RunResult, SlamSystem, SlamSystemError, TrackState, file_sha256
+from sal_wrappers.base import RunResult, SlamSystem, SlamSystemError, StopCheck, TrackState, file_sha256
 from sal_wrappers.prefetch import prefetched
 from sal_wrappers.reference_vo.lens import Lens, make_lens
 from sal_wrappers.reference_vo.odometry import Odometry
@@ -72,6 +78,7 @@ class ReferenceVO(SlamSystem):
     #: bump when a change of the VO code changes results (identity() also hashes source_files())
     version = 1
     deterministic = True
+    stoppable = True
 
     def __init__(
         self,
@@ -115,7 +122,7 @@ class ReferenceVO(SlamSystem):
         sources = {path.name: file_sha256(path) for path in source_files()}
         return {**super().identity(), "opencv": cv2.__version__, "sources": sources}
 
-    def run(self, sequence: Sequence, workdir: Path, timeout: float | None = None) -> RunResult:
+    def run(self, sequence: Sequence, workdir: Path, timeout: float | None = None, stop: StopCheck | None = None) -> RunResult:
         mode = self.mode_for(sequence, self.mode)
         start = time.monotonic()
         workdir = Path(workdir)
@@ -126,6 +133,7 @@ class ReferenceVO(SlamSystem):
         poses: list[np.ndarray | None] = [None] * n
         segment = np.full(n, -1, np.int64)
         failure: str | None = None
+        stopped: str | None = None
         lens: Lens | None = None
         odometry: Odometry | None = None
         cv2.setRNGSeed(0)
@@ -143,15 +151,17 @@ class ReferenceVO(SlamSystem):
                 failure = _failed(log, exc)
             track_time, done = 0.0, 0
             if failure is None and odometry is not None:
-                failure, done, track_time = _track_frames(sequence, mode, odometry, log, start, timeout, states, poses, segment)
+                loop = _Loop(states, poses, segment, start, timeout, stop)
+                failure, stopped, done, track_time = _track_frames(sequence, mode, odometry, log, loop)
             if done < n and odometry is not None and odometry.segments:
                 states[done:] = np.where(states[done:] == TrackState.OK, TrackState.OK, TrackState.LOST)
             trajectory, sizes = _largest_segment(sequence, lens, states, poses, segment)
-            if failure is None and trajectory is None:
+            if failure is None and stopped is None and trajectory is None:
                 failure = "no frame was tracked"
             log.write(
                 f"# {int((states == TrackState.OK).sum())}/{n} frames tracked, {odometry.segments if odometry else 0} map(s), "
                 f"{track_time:.2f} s tracking ({done / max(track_time, 1e-9):.1f} frames/s)"
+                + (f"; STOPPED: {stopped}" if stopped else "")
                 + (f"; FAILED: {failure}" if failure else "")
                 + "\n"
             )
@@ -176,30 +186,34 @@ class ReferenceVO(SlamSystem):
             wall_time_s=time.monotonic() - start,
             track_time_s=track_time,
             failure=failure,
+            stopped=stopped,
             log_path=log_path,
             log_tail="\n".join(lines[-15:]),
             info=info,
         )
 
 
-def _track_frames(
-    sequence: Sequence,
-    mode: str,
-    odometry: Odometry,
-    log: TextIO,
-    start: float,
-    timeout: float | None,
-    states: np.ndarray,
-    poses: list[np.ndarray | None],
-    segment: np.ndarray,
-) -> tuple[str | None, int, float]:
-    """Step ``odometry`` through the frames (decoded ahead), filling ``states``, ``poses`` and
-    ``segment`` by position and logging each frame; returns (failure, frames done, tracking
-    time in s). Decoding errors are the caller's, not the system's: they raise."""
+@dataclass(frozen=True)
+class _Loop:
+    """What the frame loop fills by position (``states``, ``poses`` as T_wc, map ``segment``)
+    and what ends it: the run's ``start`` (``time.monotonic()``), its ``timeout`` (s), ``stop``."""
+
+    states: np.ndarray
+    poses: list[np.ndarray | None]
+    segment: np.ndarray
+    start: float
+    timeout: float | None
+    stop: StopCheck | None
+
+
+def _track_frames(sequence: Sequence, mode: str, odometry: Odometry, log: TextIO, loop: _Loop) -> tuple[str | None, str | None, int, float]:
+    """Step ``odometry`` through the frames (decoded ahead), filling ``loop``'s arrays and
+    logging each frame; returns (failure, why it was stopped, frames done, tracking time in s).
+    Decoding errors are the caller's, not the system's: they raise."""
     failure, done, track_time = None, 0, 0.0
     for pos, timestamp, image, right, depth in prefetched(_decoded(sequence, mode)):
-        if timeout is not None and time.monotonic() - start > timeout:
-            failure = f"timed out after {timeout:g} s"
+        if loop.timeout is not None and time.monotonic() - loop.start > loop.timeout:
+            failure = f"timed out after {loop.timeout:g} s"
             log.write(f"# {failure} at frame {pos}\n")
             break
         t0 = time.perf_counter()
@@ -212,12 +226,26 @@ def _track_frames(
         track_time += ms / 1000
         done = pos + 1
         for p, state, inliers, T_wc in updates:
-            states[p], poses[p], segment[p] = state, T_wc, odometry.segments - 1
+            loop.states[p], loop.poses[p], loop.segment[p] = state, T_wc, odometry.segments - 1
             note = "" if p == pos else f" (frame {pos} started the map)"
             log.write(
                 f"{p} {sequence.records[p].timestamp:.6f} {TrackState(state).name.lower()} {inliers} {ms if p == pos else 0:.1f}{note}\n"
             )
-    return failure, done, track_time
+        stopped = _stop_reason(loop, odometry, done)
+        if stopped is not None:
+            log.write(f"# stopped after frame {pos}: {stopped}\n")
+            return None, stopped, done, track_time
+    return failure, None, done, track_time
+
+
+def _stop_reason(loop: _Loop, odometry: Odometry, done: int) -> str | None:
+    """What ``loop.stop`` says after ``done`` frames (never after the last one: nothing is left
+    to save), given the states that are final: all frames done, except before a mono map exists
+    the start's reference frame and those after it, which the first map may still track."""
+    if loop.stop is None or done >= len(loop.states):
+        return None
+    settled = done if odometry.started or odometry.init is None else int(odometry.init["pos"])
+    return loop.stop(loop.states[:settled], len(loop.states))
 
 
 def source_files() -> list[Path]:
