@@ -179,6 +179,17 @@ def test_a_stopped_run_is_recorded_and_kept_apart_from_full_runs_in_the_cache(tm
     assert again.cached and not again.passed and "stopped" not in again.runs[0] and calls(log) == 2
 
 
+def test_a_failed_tests_message_says_its_edge_runs_were_stopped(tmp_path: Path) -> None:
+    """The metrics of a stopped run cover the frames it ran: the failure message says so."""
+    from pytest_sal.engine.requirement_runner import SearchSettings, failure_message, search_outcome
+
+    strict = runner(tmp_path, tracking_rate >= 0.9, StoppableFake(calls_file=str(tmp_path / "calls.jsonl")))
+    outcome = search_outcome(strict, strict.requirement, SearchSettings(max_trials=3), "test_x")
+    message = failure_message(outcome)
+    assert outcome.verdict == "failed"
+    assert "failed: tracking_rate >= 0.9; 1 of 1 run(s) stopped early: tracking_rate >= 0.9 can no longer hold: 1 of 8 frames" in message
+
+
 def test_the_same_rule_reads_its_stopped_run_back(tmp_path: Path) -> None:
     log = tmp_path / "calls.jsonl"
     first = runner(tmp_path, tracking_rate >= 0.9, StoppableFake(calls_file=str(log))).evaluate(20.0)

@@ -160,6 +160,13 @@ def _outcome(
     )
 
 
+def _stopped_text(trial: Trial) -> str:
+    """``; stopped early: <why>`` when runs of ``trial`` were stopped early (their metrics cover
+    only the frames they ran), else nothing."""
+    stopped = [run["stopped"] for run in trial.runs if run.get("stopped")]
+    return f"; {len(stopped)} of {len(trial.runs)} run(s) stopped early: {stopped[0]}" if stopped else ""
+
+
 def _metrics_text(metrics: dict[str, Any], judged: tuple[str, ...] = ()) -> str:
     """The trial's main metrics and those ``judged`` by a criterion; a judged KITTI metric
     that is missing says why (the sequence is shorter than the shortest segment...)."""
@@ -190,11 +197,12 @@ def failure_message(outcome: Outcome) -> str:
         )
     elif outcome.verdict == "passed":  # failed by a --sal-compare-fail check only
         lines.append(f"regressed against the history (the requirement is met): {outcome.requirement}")
-        lines.append(f"  at {outcome.parameter} = {first.value:g}{unit}: {_metrics_text(first.metrics, judged)}")
+        lines.append(f"  at {outcome.parameter} = {first.value:g}{unit}: {_metrics_text(first.metrics, judged)}{_stopped_text(first)}")
     else:
         lines.append(f"requirement not met: {outcome.requirement}")
         lines.append(
             f"  at {outcome.parameter} = {first.value:g}{unit}: {_metrics_text(first.metrics, judged)}; failed: {', '.join(first.failed)}"
+            f"{_stopped_text(first)}"
         )
     speculative = sum(t.speculative for t in outcome.trials)
     trials = f"{len(outcome.trials)} trials" + (f" ({speculative} speculative)" if speculative else "")
@@ -204,7 +212,7 @@ def failure_message(outcome: Outcome) -> str:
     )
     for label, trial in zip(("pass end", "fail end"), outcome.end_trials()):
         if trial is not None:
-            lines.append(f"  {label} {trial.value:g}{unit}: {_metrics_text(trial.metrics, judged)} ({trial.votes()})")
+            lines.append(f"  {label} {trial.value:g}{unit}: {_metrics_text(trial.metrics, judged)} ({trial.votes()}){_stopped_text(trial)}")
     for text in outcome.contradictions:
         lines.append(f"  not monotonic: {text}")
     if outcome.regression:
