@@ -72,6 +72,8 @@ class ReferenceVO(SlamSystem):
     #: bump when a change of the VO code changes results (identity() also hashes source_files())
     version = 1
     deterministic = True
+    #: one core: it tracks frame by frame in the calling process
+    num_cpus = 1.0
 
     def __init__(
         self,
