@@ -8,6 +8,7 @@ import socket
 from pathlib import Path
 
 import pytest
+from kitti_excerpt import kitti_copy
 
 from pytest_sal import tracking_rate
 from pytest_sal.engine.executor import Executor, LocalExecutor
@@ -31,17 +32,6 @@ class WorkerLost(Executor):
 
     def _run(self, job: RunJob) -> RunOutput:
         return failed_output(job, LOST, LOST)
-
-
-def kitti_copy(shared_data: Path, root: Path, frames: int = 3) -> Path:
-    """The first ``frames`` real KITTI 07 frames as a sequence folder under ``root``."""
-    source, target = shared_data / "kitti" / "sequences" / "07", root / "sequences" / "07"
-    (target / "image_0").mkdir(parents=True)
-    for i in range(frames):
-        shutil.copy(source / "image_0" / f"{i:06d}.png", target / "image_0")
-    shutil.copy(source / "calib.txt", target)
-    (target / "times.txt").write_text("".join((source / "times.txt").read_text().splitlines(True)[:frames]))
-    return target
 
 
 def trial_runner(dataset: Sequence, tmp_path: Path, executor: Executor) -> TrialRunner:
