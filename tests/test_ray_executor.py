@@ -226,7 +226,7 @@ def test_a_dataset_the_worker_cannot_read_is_one_error_naming_the_worker(executo
     shutil.rmtree(folder)
     with pytest.raises(DatasetError) as error:
         trial_runner.evaluate(30.0)
-    assert str(error.value).startswith(f"{folder}: the dataset kitti")
+    assert error.value.path == str(folder) and str(error.value).startswith(f"{folder}: the dataset kitti")
     assert " on Ray node " in str(error.value) and "(127.0.0.1): every worker must see the dataset at the same path" in str(error.value)
 
 
