@@ -61,7 +61,7 @@ class SalSession:
         """Where runs happen (``--sal-executor``), made when first needed; a local Ray starts
         on its first run, not here."""
         if self._executor is None:
-            from pytest_sal.engine.executor import make_executor
+            from pytest_sal.engine.executor_factory import make_executor
 
             self._executor = make_executor(self.options.executor, self.options.ray_address)
         return self._executor

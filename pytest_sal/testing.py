@@ -1,5 +1,6 @@
 """Test doubles for testing pytest-sal itself and plug-ins: a deterministic fake SLAM system
-whose tracking degrades with the severity of the perturbation it is given.
+whose tracking degrades with the severity of the perturbation it is given, and one that loses
+the worker it runs on (for an executor's retries and time limit).
 
 ``FakeSlam`` never looks at pixels: it reads the applied chain from the perturbed sequence
 (``sequence.meta["perturbation"]``), takes the value of one parameter and tracks the first
@@ -13,6 +14,8 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
+import signal
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -23,7 +26,7 @@ import numpy as np
 from sal_adapters import Sequence
 from sal_wrappers.base import RunResult, SlamSystem, StopCheck, TrackState
 
-__all__ = ["FakeSlam", "SleepySlam", "applied_value"]
+__all__ = ["FakeSlam", "LostWorkerSlam", "SleepySlam", "applied_value"]
 
 
 def applied_value(sequence: Sequence, address: str) -> float | None:
@@ -38,6 +41,12 @@ def applied_value(sequence: Sequence, address: str) -> float | None:
         if step.get("module") == module and name in step.get("params", {}):
             return float(step["params"][name])
     return None
+
+
+def _share_function(tracked: str) -> Callable[[float], float]:
+    """The expression ``tracked`` in ``v`` as a function (``min``, ``max`` and ``abs`` allowed)."""
+    share: Callable[[float], float] = eval(f"lambda v: {tracked}", {"min": min, "max": max, "abs": abs})
+    return share
 
 
 class FakeSlam(SlamSystem):
@@ -60,8 +69,18 @@ class FakeSlam(SlamSystem):
         self.flaky = float(flaky)
         self.calls_file = calls_file
         self.deterministic = not self.flaky  # type: ignore[misc]  # one run per trial unless flaky
-        self._share: Callable[[float], float] = eval(f"lambda v: {tracked}", {"min": min, "max": max, "abs": abs})
+        self._share = _share_function(tracked)
         self._runs = 0
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickled without the compiled ``tracked`` (made again from its text when unpickled):
+        plain pickle can send it to a worker, and cloudpickle (Ray) need not copy a lambda's
+        code, which took 11 ms a run."""
+        return {name: value for name, value in self.__dict__.items() if name != "_share"}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._share = _share_function(self.tracked)
 
     def options(self) -> dict[str, Any]:
         return {"parameter": self.parameter, "tracked": self.tracked, "flaky": self.flaky}
@@ -116,7 +135,7 @@ class SleepySlam(FakeSlam):
     def options(self) -> dict[str, Any]:
         return {**super().options(), "sleep_s": self.sleep_s}
 
-    def run(self, sequence: Sequence, workdir: Path, timeout: float | None = None) -> RunResult:
+    def run(self, sequence: Sequence, workdir: Path, timeout: float | None = None, stop: StopCheck | None = None) -> RunResult:
         start = time.perf_counter()
         time.sleep(self.sleep_s)
         result = super().run(sequence, workdir, timeout)
@@ -124,3 +143,38 @@ class SleepySlam(FakeSlam):
 
     def __reduce__(self) -> tuple[type, tuple[str, str, float]]:
         return SleepySlam, (self.parameter, self.tracked, self.sleep_s)
+
+
+class LostWorkerSlam(FakeSlam):
+    """A ``FakeSlam`` that loses the process it runs in, as its ``switch`` file says when a run
+    starts: ``kill`` (SIGKILL, every run), ``kill-once`` (SIGKILL after writing ``never`` into
+    the file, so the retry runs normally) or ``hang`` (sleeps an hour, ignoring the timeout);
+    anything else, or no file, runs as ``FakeSlam``. ``calls_file`` gets ``{"lost": ...}`` for
+    each run lost. Only for an executor that runs it in a worker process (Ray): here it would
+    kill or block the test session itself. ``info["code"]`` of a result is this module's file,
+    to show which code the worker imported. The switch's path is an option (a cache key part);
+    what the file says is not, so a run lost before can be stored once it runs."""
+
+    name = "lost_worker_fake"
+
+    def __init__(self, switch: str, **options: Any):
+        super().__init__(**options)
+        self.switch = switch
+
+    def options(self) -> dict[str, Any]:
+        return {**super().options(), "switch": self.switch}
+
+    def run(self, sequence: Sequence, workdir: Path, timeout: float | None = None, stop: StopCheck | None = None) -> RunResult:
+        switch = Path(self.switch)
+        says = switch.read_text(encoding="utf-8").strip() if switch.is_file() else ""
+        if says in ("kill", "kill-once", "hang") and self.calls_file:
+            with open(self.calls_file, "a", encoding="utf-8") as handle:
+                handle.write(json.dumps({"lost": says}) + "\n")
+        if says == "kill-once":
+            switch.write_text("never", encoding="utf-8")
+        if says in ("kill", "kill-once"):
+            os.kill(os.getpid(), signal.SIGKILL)
+        if says == "hang":
+            time.sleep(3600)
+        result = super().run(sequence, workdir, timeout)
+        return dataclasses.replace(result, info={**result.info, "code": __file__})

@@ -227,6 +227,7 @@ class SlamSystem:
     arguments in ``__init__`` (checked there: ``SlamSystemError`` names a bad one) and implement
     ``run``. ``options()`` returns the options as a JSON-ready dict; ``identity()`` adds to them
     whatever else decides the results (the files a system runs) and is the cache key's part.
+    ``resources()`` says what one run takes (CPUs, GPUs, memory) for the executor's scheduler.
     """
 
     #: the name shown in results, tables and history (the registry name; an instance may set
@@ -243,6 +244,11 @@ class SlamSystem:
     #: ``run`` takes a ``stop`` and stops the run when it says so; a system that cannot stop
     #: (``command``: it runs the whole program) leaves it ``False`` and is never given one
     stoppable: ClassVar[bool] = False
+    #: what one run takes where it runs (``resources()``): CPU cores and GPUs (fractions allowed)
+    #: and memory in bytes (``None``: not reserved); a Ray worker's scheduler reserves them
+    num_cpus: float = 1.0
+    num_gpus: float = 0.0
+    memory: int | None = None
 
     def options(self) -> dict[str, Any]:
         """The configured options (JSON-ready)."""
@@ -252,6 +258,12 @@ class SlamSystem:
         """Everything that decides this system's results, for cache keys: name, version,
         options, and the content of the files it runs (JSON-ready)."""
         return {"name": self.name, "version": self.version, "options": self.options()}
+
+    def resources(self) -> dict[str, Any]:
+        """What one run needs where it runs: ``num_cpus`` and ``num_gpus`` (floats) and ``memory``
+        (bytes, or ``None``). Never part of ``identity()``: where a run happens does not change
+        its result, so the cache keys stay the same."""
+        return {"num_cpus": float(self.num_cpus), "num_gpus": float(self.num_gpus), "memory": self.memory}
 
     def version_text(self) -> str:
         """What ran, in words, for the history and reports: the name, the versions its identity

@@ -55,7 +55,12 @@ _OPTIONS = (
     "version",
     "depends",
     "deterministic",
+    "num_cpus",
+    "num_gpus",
+    "memory",
 )
+#: The most CPUs and GPUs one run may ask for.
+_MOST_CPUS, _MOST_GPUS = 1024.0, 64.0
 _NAME = re.compile(r"[A-Za-z0-9._-]{1,64}")
 #: Names in the work folder that the system writes itself.
 _RESERVED = {"settings", LOG_NAME, "timestamps.txt", "timestamps_ns.txt", "associations.txt", "output_times.txt"}
@@ -88,6 +93,9 @@ class CommandOptions:
     settings_text: str
     version: str | None
     depends: list[Path]
+    num_cpus: float
+    num_gpus: float
+    memory: int | None
     used: frozenset[str] = frozenset()
 
     @property
@@ -122,6 +130,7 @@ def parse_command_options(options: Mapping[str, Any]) -> CommandOptions:
         **_staging(options),
         **_environment(options),
         **_identity(options),
+        **_resources(options),
     )
     return dataclasses.replace(config, used=frozenset(_used_placeholders(config)))
 
@@ -217,6 +226,28 @@ def _identity(options: Mapping[str, Any]) -> dict[str, Any]:
         if not path.exists():
             raise SlamSystemError(f"command: depends: {path} does not exist (list the files and folders whose content decides the results)")
     return {"version": None if version is None else str(version), "depends": depends}
+
+
+def _resources(options: Mapping[str, Any]) -> dict[str, Any]:
+    """What one run takes where it runs (not part of the cache key): CPUs, GPUs, memory."""
+    num_cpus = _number("num_cpus", options.get("num_cpus", 1.0), _MOST_CPUS, "CPU cores, 0 < num_cpus <= 1024 (fractions allowed)")
+    num_gpus = _number("num_gpus", options.get("num_gpus", 0.0), _MOST_GPUS, "GPUs, 0 <= num_gpus <= 64 (fractions allowed)", zero=True)
+    memory = options.get("memory")
+    if memory is not None and (not isinstance(memory, int) or isinstance(memory, bool) or memory <= 0):
+        raise SlamSystemError(
+            f"command: option memory={memory!r} is not allowed; give the memory one run takes in bytes as a whole number > 0 "
+            "(8000000000 for 8 GB), or leave it out"
+        )
+    return {"num_cpus": num_cpus, "num_gpus": num_gpus, "memory": memory}
+
+
+def _number(option: str, value: Any, high: float, what: str, zero: bool = False) -> float:
+    """``value`` as a float above 0 (or 0 itself when ``zero``) up to ``high``, else one error
+    naming the option, the value and the range ``what``."""
+    number = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if not number or not (0 < value <= high or (zero and value == 0)):
+        raise SlamSystemError(f"command: option {option}={value!r} is not allowed; give {what}")
+    return float(value)
 
 
 def _used_placeholders(config: CommandOptions) -> set[str]:

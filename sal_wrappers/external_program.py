@@ -101,10 +101,14 @@ class CommandSystem(SlamSystem):
         version: the program's version as you name it (a string); part of the cache key.
         depends: more files or folders whose content decides the results (modules a script
             imports, a vocabulary, a config): hashed into the cache key like the program itself.
+        num_cpus, num_gpus: CPU cores (default 1) and GPUs (default 0) one run takes, fractions
+            allowed; a Ray worker reserves them (a DROID-SLAM recipe asks for ``num_gpus=1``).
+        memory: bytes of memory one run takes (an integer; default: not reserved).
 
     The cache key (``identity()``) holds the options and the SHA-256 of the files the system
     runs: the executable (``argv[0]``, looked up on ``PATH``), every other ``argv`` item that is
-    an existing file, the settings template and the ``depends`` files.
+    an existing file, the settings template and the ``depends`` files; not ``num_cpus``,
+    ``num_gpus`` or ``memory`` (``resources()``), which decide where a run happens, not its result.
     """
 
     name = "command"
@@ -116,6 +120,7 @@ class CommandSystem(SlamSystem):
         self.config = parse_command_options(options)
         self.name = self.config.name
         self.deterministic = self.config.deterministic  # type: ignore[misc]  # True: one run per trial, no votes
+        self.num_cpus, self.num_gpus, self.memory = self.config.num_cpus, self.config.num_gpus, self.config.memory
 
     def options(self) -> dict[str, Any]:
         config = self.config

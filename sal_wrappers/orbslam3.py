@@ -125,6 +125,8 @@ class OrbSlam3(SlamSystem):
     description = "ORB-SLAM3 (pyorbslam3 0.1.1): monocular, stereo or RGB-D visual SLAM, run in a child process"
     version = 1
     stoppable = True
+    #: a tracking thread plus local mapping and loop closing take about a core and a half
+    num_cpus = 2.0
     #: test hook, not an option: seconds the child sleeps after each tracking call (simulates
     #: a machine that cannot keep up with the sensor clock)
     _stall_s: float = 0.0

@@ -10,6 +10,9 @@ run is never sent anywhere.
 - ``ray`` (``pytest_sal.engine.ray_executor.RayExecutor``): each run is a Ray task on a local or
   remote Ray cluster, several at once; the search then evaluates several points per round.
 
+``pytest_sal.engine.executor_factory.make_executor`` makes the one ``--sal-executor`` names
+(Ray is imported only then).
+
 ``Executor.run`` blocks until the run is done and is safe to call from several threads at once:
 the runner runs a batch of runs, and the search a round of trials, each in its own thread.
 """
@@ -20,12 +23,18 @@ import threading
 from typing import Any
 
 from pytest_sal.engine.run_job import RunJob, RunOutput, run_job
+from sal_adapters.errors import SalError
 from sal_wrappers import SlamSystem
 
-__all__ = ["EXECUTORS", "Executor", "LocalExecutor", "make_executor"]
+__all__ = ["EXECUTORS", "Executor", "ExecutorError", "LocalExecutor"]
 
 #: The executors ``--sal-executor`` takes.
 EXECUTORS = ("local", "ray")
+
+
+class ExecutorError(SalError):
+    """An executor cannot be made or reached: an unknown name, Ray not installed, a Ray cluster
+    that cannot be joined or cannot fit a system's resources."""
 
 
 class Executor:
@@ -77,14 +86,3 @@ class LocalExecutor(Executor):
 
     def _run(self, job: RunJob) -> RunOutput:
         return run_job(job)
-
-
-def make_executor(name: str, address: str = "", **options: Any) -> Executor:
-    """The executor ``name`` (``local`` or ``ray``); ``address`` and ``options`` go to Ray."""
-    if name == "local":
-        return LocalExecutor()
-    if name == "ray":
-        from pytest_sal.engine.ray_executor import RayExecutor
-
-        return RayExecutor(address, **options)
-    raise ValueError(f"unknown executor {name!r}; expected one of {', '.join(EXECUTORS)}")

@@ -9,6 +9,11 @@ timeout is a failed run, never an exception) and scores the trajectory with evo.
 ``RunOutput``: the run record the cache stores, the whole ``RunResult`` (states, trajectory,
 log tail), and the report images as PNG bytes. The controller writes those (``store_artifacts``) and the cache entry, so
 nothing a remote worker wrote on its own disk is needed afterwards.
+
+The dataset is read where the run happens: ``check_readable`` first stats its folder and first
+and last frames there, so a worker that does not see it at the controller's path is one
+``DatasetError`` naming the worker and the path. ``failed_output`` is the output of a run that
+gave nothing back (a lost Ray worker): a run that tracked nothing, with its reason.
 """
 
 from __future__ import annotations
@@ -24,15 +29,26 @@ from typing import Any
 import cv2
 import numpy as np
 
-from pytest_sal.analysis.metrics import evaluate
+from pytest_sal.analysis.metrics import RunMetrics, evaluate
 from pytest_sal.engine.early_stop import StopRule
 from pytest_sal.engine.outcome import TRIAL_METRICS
 from pytest_sal.store.trial_cache import ContentCache
-from sal_adapters import Sequence
+from sal_adapters import Sequence, Trajectory
+from sal_adapters.errors import DatasetError
 from sal_modules import Perturbation, perturb
 from sal_wrappers import RunResult, SlamSystem, TrackState, machine_load
 
-__all__ = ["RunJob", "RunOutput", "cached_sequence", "machine_failure", "run_job", "store_artifacts", "worker_name"]
+__all__ = [
+    "RunJob",
+    "RunOutput",
+    "cached_sequence",
+    "check_readable",
+    "failed_output",
+    "machine_failure",
+    "run_job",
+    "store_artifacts",
+    "worker_name",
+]
 
 
 @dataclass(frozen=True)
@@ -100,8 +116,11 @@ def worker_name() -> str:
     return f"{socket.gethostname()}:{os.getpid()}"
 
 
-def run_job(job: RunJob) -> RunOutput:
-    """Perturb, run, score: one run of ``job`` in this process (the system may start its own child)."""
+def run_job(job: RunJob, worker: str | None = None) -> RunOutput:
+    """Perturb, run, score: one run of ``job`` in this process (the system may start its own child).
+    ``worker`` names where it runs, in messages and in the output (default ``worker_name()``)."""
+    worker = worker or worker_name()
+    check_readable(job.dataset, worker)
     perturbed = job.dataset if job.module is None else perturb(job.dataset, job.module, seed=job.seed)
     if job.frames_cache is not None:
         perturbed = cached_sequence(perturbed, ContentCache(job.frames_cache))
@@ -111,15 +130,56 @@ def run_job(job: RunJob) -> RunOutput:
     try:
         result = job.system.run(perturbed, job.workdir / f"{job.key[:12]}-run{job.number}", timeout=job.timeout, **stop)
     except MemoryError:
-        states = np.full(len(perturbed), TrackState.NOT_INITIALISED, dtype=np.int8)
-        result = RunResult(
-            system=job.system.name,
-            sequence=perturbed.name,
-            sensor=perturbed.sensor,
-            timestamps=perturbed.timestamps,
-            states=states,
-            failure="out of memory (MemoryError)",
-        )
+        result = _not_initialised(job.system, perturbed, "out of memory (MemoryError)")
+    record, scored = _scored_record(job, result, groundtruth, machine_failure(result, load))
+    images: dict[str, bytes] = {}
+    if job.artifacts:
+        if scored.ate is not None and groundtruth is not None:
+            images["trajectory"] = _trajectory_png(job, perturbed.name, groundtruth, scored.ate.estimate)
+        if len(perturbed):
+            images["frame"] = _example_frame_png(perturbed)
+    return RunOutput(record=record, result=result.to_dict(), images=images, worker=worker)
+
+
+def failed_output(job: RunJob, failure: str, not_cached: str | None, worker: str = "") -> RunOutput:
+    """The output of a run of ``job`` that gave no result (its worker was lost, it never
+    answered): every frame of the clean sequence NOT_INITIALISED, ``failure`` its reason, scored
+    like any run; ``not_cached`` (the machine's failure: the next session runs it again) goes
+    into the record when given."""
+    result = _not_initialised(job.system, job.dataset, failure)
+    record, _ = _scored_record(job, result, job.dataset.groundtruth, not_cached)
+    return RunOutput(record=record, result=result.to_dict(), worker=worker)
+
+
+def check_readable(dataset: Sequence, worker: str) -> None:
+    """``DatasetError`` unless ``dataset``'s files can be read here: its source folder and the
+    first and last frame's files (a few ``stat`` calls; a rendered sequence reads no files and
+    is not checked). A run reads the dataset where it runs, so every worker must see it at the
+    controller's path."""
+    frames = dataset.records[0].files + dataset.records[-1].files if len(dataset) else []
+    folder = [dataset.source] if dataset.source is not None and frames else []
+    for path in folder + frames:
+        if not path.exists():
+            raise DatasetError(
+                f"the dataset {dataset.name} is not readable on worker {worker}: every worker must see the dataset at the same "
+                "path as the controller (mount or copy it there)",
+                path,
+            )
+
+
+def _not_initialised(system: SlamSystem, sequence: Sequence, failure: str) -> RunResult:
+    """A failed run of ``system`` on ``sequence`` that tracked nothing: every frame NOT_INITIALISED."""
+    states = np.full(len(sequence), TrackState.NOT_INITIALISED, dtype=np.int8)
+    return RunResult(
+        system=system.name, sequence=sequence.name, sensor=sequence.sensor, timestamps=sequence.timestamps, states=states, failure=failure
+    )
+
+
+def _scored_record(
+    job: RunJob, result: RunResult, groundtruth: Trajectory | None, not_cached: str | None
+) -> tuple[dict[str, Any], RunMetrics]:
+    """The run record of ``result`` scored against ``groundtruth`` (``value``, ``module``,
+    ``metrics``; ``not_cached`` when given), and the scores themselves."""
     scored = evaluate(result, groundtruth, kitti_segments=job.kitti_segments)
     metrics = scored.to_dict()
     for name in TRIAL_METRICS:  # NaN judges like null, and a stored record holds no NaN
@@ -130,16 +190,10 @@ def run_job(job: RunJob) -> RunOutput:
     metrics["load"] = result.load
     if result.stopped is not None:
         metrics["stopped"] = result.stopped
-    images: dict[str, bytes] = {}
-    if job.artifacts:
-        if scored.ate is not None and groundtruth is not None:
-            images["trajectory"] = _trajectory_png(job, perturbed.name, groundtruth, scored.ate.estimate)
-        if len(perturbed):
-            images["frame"] = _example_frame_png(perturbed)
     record: dict[str, Any] = {"value": job.value, "module": None if job.module is None else job.module.to_dict(), "metrics": metrics}
-    if (reason := machine_failure(result, load)) is not None:
-        record["not_cached"] = reason
-    return RunOutput(record=record, result=result.to_dict(), images=images, worker=worker_name())
+    if not_cached is not None:
+        record["not_cached"] = not_cached
+    return record, scored
 
 
 def store_artifacts(output: RunOutput, folder: Path | None, key: str) -> dict[str, Any]:

@@ -79,6 +79,8 @@ class ReferenceVO(SlamSystem):
     version = 1
     deterministic = True
     stoppable = True
+    #: one core: it tracks frame by frame in the calling process
+    num_cpus = 1.0
 
     def __init__(
         self,
