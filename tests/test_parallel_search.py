@@ -350,3 +350,24 @@ def test_the_width_is_free_runs_over_the_runs_a_trial_needs(tmp_path: Path) -> N
     assert search_width(fake_runner(tmp_path, 4, runs=5)) == 2  # a vote starts with lead 2 runs
     assert search_width(fake_runner(tmp_path, 1, runs=5)) == 1
     assert search_width(fake_runner(tmp_path, 5, runs=5)) == 2
+
+
+def test_a_search_cached_along_its_path_sends_no_run_and_does_not_speculate(tmp_path: Path) -> None:
+    """A second session with free workers walks the cached path trial by trial: speculating
+    beside a cached midpoint would send runs the first session never made."""
+    from pytest_sal.store.trial_cache import ContentCache
+
+    settings = SearchSettings(tolerance_pct=5.0, max_trials=12)
+    cache = ContentCache(tmp_path / "cache")
+    first = fake_runner(tmp_path, 1)
+    first.cache = cache
+    sequential = run_search(first, first.requirement, settings)
+    again = fake_runner(tmp_path, 4)
+    again.cache = cache
+    cached = run_search(again, again.requirement, settings)
+    assert again.executor.submitted == 0 and cached.speculative == 0
+    assert [(t.value, t.passed) for t in cached.trials] == [(t.value, t.passed) for t in sequential.trials]
+    # the pure search: a cached midpoint goes alone, an uncached one beside speculative trials
+    case = Case(SearchSpace(mild=0.0, severe=1000.0), 400.0, 0.0, 0.5, None, 40, None)
+    walked = boundary_search(case.evaluate, case.space, 0.0, 0.5, 40, width=fixed(7), cached=lambda value: True)
+    assert walked.rounds == len(walked.trials) and walked.speculative == 0

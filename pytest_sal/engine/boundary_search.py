@@ -43,6 +43,8 @@ both with uniform ones). After a pass, ``k = 2`` is the midpoint and the quarter
 fail side, and ``k = 5`` adds an eighth point in each half. The round then walks the tree along
 the verdicts: the trials on that walk are the search path, appended in its order and counted by
 ``max_trials``; the others are appended after them, ``speculative``, extra to the budget.
+A step whose midpoint is ``cached`` (it costs no run) goes alone: a search cached along its
+path, as in a second session, walks it without speculating and sends nothing.
 
 Why the interval is the sequential one: a node lies strictly inside its bracket, and its two
 children bisect the halves the sequential search would hold after its pass or fail (a verdict
@@ -169,6 +171,7 @@ def boundary_search(
     judge: Judge | None = None,
     rel_tolerance: float | None = None,
     width: Callable[[], int] | None = None,
+    cached: Callable[[float], bool] | None = None,
 ) -> SearchResult:
     """Search the failure boundary (see the module text).
 
@@ -184,10 +187,13 @@ def boundary_search(
         width: how many trials a round may hold now, asked before each round (``None``: 1,
             the sequential search); above 1, ``evaluate`` and ``judge.confirm`` are called
             from several threads at once, for distinct trials.
+        cached: whether a trial at a value would be read back from a cache (it costs no run):
+            a bisection step whose midpoint is cached goes alone, without speculative trials
+            beside it, so a search that is cached along its path sends no new run.
     """
     if tolerance is None and rel_tolerance is None:
         raise ValueError("boundary_search needs tolerance or rel_tolerance")
-    search = _Search(evaluate, space, max_trials, judge, width or (lambda: 1), tolerance, rel_tolerance)
+    search = _Search(evaluate, space, max_trials, judge, width or (lambda: 1), tolerance, rel_tolerance, cached or (lambda value: False))
     (first,) = search.run([edge])
     flaky = False
     if judge is not None:
@@ -250,6 +256,7 @@ class _Search:
         width: Callable[[], int],
         tolerance: float | None,
         rel_tolerance: float | None,
+        cached: Callable[[float], bool],
     ):
         self.evaluate = evaluate
         self.space = space
@@ -258,6 +265,7 @@ class _Search:
         self.width = width
         self.tolerance = tolerance
         self.rel_tolerance = rel_tolerance
+        self.cached = cached
         self.trials: list[TrialPoint] = []
         self.rounds = 0
 
@@ -300,7 +308,8 @@ class _Search:
             assert passing is not None and failing is not None
             if (stop := self._stop(passing, failing)) is not None:
                 return stop
-            nodes = self._tree(passing, failing, max(1, self.width()))
+            size = 1 if self.cached(self.space.midpoint(passing, failing)) else max(1, self.width())
+            nodes = self._tree(passing, failing, size)
             reached = dict(zip((node.path for node in nodes), self._round(self._point, [node.value for node in nodes])))
             path: tuple[int, ...] = ()
             while (point := reached.pop(path, None)) is not None:

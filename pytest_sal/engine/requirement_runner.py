@@ -87,6 +87,7 @@ def run_search(
         judge=judge,
         rel_tolerance=rel_tolerance,
         width=functools.partial(search_width, runner),
+        cached=runner.cached,
     )
     for point in result.trials:
         point.info.speculative = point.speculative

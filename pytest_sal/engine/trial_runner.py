@@ -243,6 +243,14 @@ class TrialRunner:
                 return None
         return positions
 
+    def cached(self, value: float) -> bool:
+        """The first run at ``value`` is in the cache (finished, or stopped by this runner's
+        rule): a trial there costs no run. Only looks for the entry's file."""
+        if self.cache is None:
+            return False
+        keys = [self.key(value)] + ([] if self.stop_rule is None else [self.key(value, stop=self.stop_rule)])
+        return any(self.cache.path(key).is_file() for key in keys)
+
     def evaluate(self, value: float) -> Trial:
         """The trial at ``value``: runs until the vote's lead settles (``VotePolicy.lead``)."""
         trial = Trial(value=float(value), passed=False)
