@@ -4,6 +4,7 @@ the outcomes, reports and summary at its end are ``pytest_sal.session_results``.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -63,7 +64,9 @@ class SalSession:
         if self._executor is None:
             from pytest_sal.engine.executor_factory import make_executor
 
-            self._executor = make_executor(self.options.executor, self.options.ray_address)
+            # every xdist worker counts on its share of the cluster when it decides how many runs to send at once
+            share = {"share": int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))} if self.options.executor == "ray" else {}
+            self._executor = make_executor(self.options.executor, self.options.ray_address, **share)
         return self._executor
 
     @pytest.hookimpl(optionalhook=True)

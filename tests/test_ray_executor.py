@@ -129,14 +129,36 @@ def test_a_local_ray_is_on_loopback_only_and_says_so(executor: RayExecutor, home
     assert listening == {"127.0.0.1"}  # GCS, raylet, agents and workers: no port on another address
     assert executor.address.startswith("127.0.0.1:")
     assert executor.describe() == f"ray at {executor.address}: 1 node, 2 CPUs, 0 GPUs"
-    assert (
-        executor.slots(create("reference_vo")) == 2
-    )  # before any run: both CPUs are free and executor.slots(create("command", argv=["true"], num_cpus=2)) == 1
+    # no run in flight: both CPUs are this executor's
+    assert executor.slots(create("reference_vo")) == 2 and executor.slots(create("command", argv=["true"], num_cpus=2)) == 1
     assert HOME_TOKEN.exists() == home_token_existed  # the token came from RAY_AUTH_TOKEN, not a new file
 
 
+def test_slots_count_the_share_of_the_cluster_less_the_runs_in_flight(executor: RayExecutor, tmp_path: Path) -> None:
+    """Slots follow the cluster's size and this executor's own runs, not Ray's free-resource
+    report, which lags the runs that just ended: a search's width does not depend on timing."""
+    import threading
+    import time
+
+    from pytest_sal.testing import SleepySlam
+
+    assert RayExecutor(num_cpus=4, share=2).slots(create("reference_vo")) == 2  # two xdist workers share 4 CPUs
+    sleepy = SleepySlam(sleep_s=1.5)
+    job = runner(tmp_path, sleepy, executor)
+    running = threading.Thread(target=job.evaluate, args=(30.0,))
+    running.start()
+    deadline = time.monotonic() + 5
+    while executor.slots(sleepy) == 2 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    during = executor.slots(sleepy)
+    running.join()
+    assert during == 1 and executor.slots(sleepy) == 2  # free again the moment the run is back
+
+
 def test_the_deterministic_search_gives_the_same_trials_and_boundary_on_ray(searched: Searched, executor: RayExecutor) -> None:
-    assert trials(searched.ray) == trials(searched.local)
+    # 2 CPUs: a bisection round holds two trials; the walk along the verdicts is the local search
+    path = [t for t, point in zip(trials(searched.ray), searched.ray.trials) if not point.speculative]
+    assert path == trials(searched.local) and any(point.speculative for point in searched.ray.trials)
     assert searched.ray.boundary == searched.local.boundary and searched.ray.verdict == searched.local.verdict
     boundary = searched.ray.boundary
     assert boundary.fail_value is not None and boundary.pass_value is not None

@@ -78,10 +78,9 @@ _LOST = (WorkerCrashedError, NodeDiedError, LocalRayletDiedError, ObjectLostErro
 
 @dataclass(frozen=True)
 class _ClusterView:
-    """What the cluster said at ``at`` (``time.monotonic()``): free resources and its live nodes' totals."""
+    """What the cluster said at ``at`` (``time.monotonic()``): its live nodes' resources."""
 
     at: float
-    available: dict[str, float]
     nodes: list[dict[str, float]]
 
 
@@ -94,12 +93,18 @@ class RayExecutor(Executor):
         max_retries: times Ray runs a task again after its worker or node was lost.
         temp_dir: the folder under which a local Ray's session folder is made (default /tmp:
             Ray's socket paths must stay short).
+        share: how many controllers submit to the cluster at once (the pytest-xdist workers of
+            a session): ``slots`` counts on this one's share of the cluster.
     """
 
     name = "ray"
 
-    def __init__(self, address: str = "", *, num_cpus: int | None = None, max_retries: int = 2, temp_dir: Path | None = None):
+    def __init__(
+        self, address: str = "", *, num_cpus: int | None = None, max_retries: int = 2, temp_dir: Path | None = None, share: int = 1
+    ):
         super().__init__()
+        self.share = max(1, int(share))
+        self._busy = {"CPU": 0.0, "GPU": 0.0}  # what this executor's runs in flight hold
         self.requested = address
         self.num_cpus = num_cpus
         self.max_retries = max_retries
@@ -218,18 +223,23 @@ class RayExecutor(Executor):
         view = self._view
         if view is None or time.monotonic() - view.at > _VIEW_TTL_S:
             nodes = [node["Resources"] for node in ray.nodes() if node["Alive"]]
-            view = self._view = _ClusterView(time.monotonic(), ray.available_resources(), nodes)
+            view = self._view = _ClusterView(time.monotonic(), nodes)
         return view
 
     def slots(self, system: SlamSystem) -> int:
-        """How many runs of ``system`` fit the cluster's free CPUs (and GPUs, when it asks for
-        some) now, at least 1. Before connecting: a local Ray's CPUs (``num_cpus``), or 1."""
+        """How many more runs of ``system`` fit this executor's share of the cluster now (its
+        CPUs, and GPUs when the system asks for some, over ``share``, less what its own runs in
+        flight hold), at least 1. The cluster's size, not the free resources Ray reports, which
+        lag the runs that just ended by about half a second; so the width of a search follows
+        the cluster, not the timing. Before connecting: a local Ray's CPUs, or 1 for a cluster
+        not yet joined."""
         needs = system.resources()
         if not self._connected:
-            cpus = (self.num_cpus or os.cpu_count() or 1) if not self.requested else needs["num_cpus"]
-            free = {"CPU": float(cpus)}
+            total = {"CPU": float((self.num_cpus or os.cpu_count() or 1) if not self.requested else needs["num_cpus"])}
         else:
-            free = self._cluster().available
+            total = {kind: sum(node.get(kind, 0.0) for node in self._cluster().nodes) for kind in ("CPU", "GPU")}
+        with self._lock:
+            free = {kind: total.get(kind, 0.0) / self.share - self._busy[kind] for kind in ("CPU", "GPU")}
         fits = free.get("CPU", 0.0) // needs["num_cpus"] if needs["num_cpus"] > 0 else float("inf")
         if needs["num_gpus"] > 0:
             fits = min(fits, free.get("GPU", 0.0) // needs["num_gpus"])
@@ -262,7 +272,21 @@ class RayExecutor(Executor):
     # -- runs ----------------------------------------------------------------------------------------
     def _run(self, job: RunJob) -> RunOutput:
         self.connect()
-        ref = _TASK.options(**self._task_options(job.system)).remote(job)
+        options = self._task_options(job.system)
+        held = {"CPU": options["num_cpus"], "GPU": options["num_gpus"]}
+        with self._lock:
+            for kind, amount in held.items():
+                self._busy[kind] += amount
+        try:
+            return self._submit(job, options)
+        finally:
+            with self._lock:
+                for kind, amount in held.items():
+                    self._busy[kind] -= amount
+
+    def _submit(self, job: RunJob, options: dict[str, Any]) -> RunOutput:
+        """Run ``job`` as a task with ``options`` and wait for it (see ``_run``)."""
+        ref = _TASK.options(**options).remote(job)
         attempts = self.max_retries + 1
         # Ray does not say when a task starts: the wait counts from here and allows one more run
         # for a place in the queue (a busy shared cluster)
