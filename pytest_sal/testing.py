@@ -54,7 +54,8 @@ class FakeSlam(SlamSystem):
     value of ``parameter``; the clean sequence tracks fully. ``crash_below`` / ``crash_above``
     make the run fail (as a crashed child would) beyond a value; ``flaky`` alternates the
     share between ``tracked(value)`` and ``tracked(value) + flaky`` from run to run (a noisy
-    system near its threshold). Options are JSON values (``tracked`` as a small expression in
+    system near its threshold). ``calls_file`` gets a line per run: the value, and the process
+    that ran it and its parent. Options are JSON values (``tracked`` as a small expression in
     ``v``, e.g. ``"min(1, v / 40)"``) so that they are part of cache keys."""
 
     name = "fake"
@@ -95,7 +96,7 @@ class FakeSlam(SlamSystem):
         self._runs += 1
         if self.calls_file:
             with open(self.calls_file, "a", encoding="utf-8") as handle:
-                handle.write(json.dumps({"value": value}) + "\n")
+                handle.write(json.dumps({"value": value, "pid": os.getpid(), "parent": os.getppid()}) + "\n")
         n = len(sequence)
         tracked = int(round(n * share))
         states = np.full(n, TrackState.LOST, dtype=np.int8)
