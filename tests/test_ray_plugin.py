@@ -66,3 +66,33 @@ def test_sal_evaluate_on_ray_needs_the_cache(capsys: pytest.CaptureFixture[str])
     assert "sal evaluate --executor ray needs the cache: its workers read the perturbed frames from it; drop --no-cache" in (
         capsys.readouterr().err
     )
+
+
+def test_sal_boundary_on_ray_finds_the_local_interval(tmp_path: Path) -> None:
+    """``sal boundary --executor ray`` (a local Ray for the command) brackets the fake's known
+    20 m boundary exactly as the local executor does; its trial path is the sequential one."""
+    from ray_clusters import ray_environment
+    from test_boundary_command import STEP, boundary, read_summary, write_config
+
+    from pytest_sal.cli.main import main
+    from pytest_sal.testing import FakeSlam
+    from sal_wrappers import SYSTEMS
+
+    SYSTEMS.register("fake", FakeSlam)
+    try:
+        config = write_config(tmp_path)
+        folder = tmp_path / "results" / "fogb" / "robustness_boundary" / "fake" / "fog_sweep_visibility_m"
+        assert main([*boundary(tmp_path / "local", "--slam-option", STEP, config=config)]) == 0
+        local = read_summary(folder).outcome
+        with ray_environment():
+            assert main([*boundary(tmp_path / "ray", "--slam-option", STEP, config=config), "--executor", "ray"]) == 0
+        on_ray = read_summary(folder).outcome
+    finally:
+        SYSTEMS.unregister("fake")
+    assert (on_ray.boundary.pass_value, on_ray.boundary.fail_value, on_ray.termination) == (
+        local.boundary.pass_value,
+        local.boundary.fail_value,
+        local.termination,
+    )
+    assert [t.value for t in on_ray.trials if not t.speculative] == [t.value for t in local.trials]
+    assert not any(t.cached for t in on_ray.trials)  # its own cache: every trial ran on Ray
