@@ -35,27 +35,11 @@ from pytest_sal.engine.executor import Executor
 from pytest_sal.engine.outcome import Boundary
 from pytest_sal.engine.requirement_runner import SearchSettings, run_search
 from pytest_sal.engine.requirements import Requirement
-from pytest_sal.engine.run_job import RunJob, RunOutput, run_job
+from pytest_sal.engine.run_job import RunJob, RunOutput
 from pytest_sal.engine.trial_runner import TrialRunner
-from pytest_sal.testing import SleepySlam
+from pytest_sal.testing import InProcessSlots, SleepySlam
 from sal_adapters import open_dataset
 from sal_modules import fog
-
-
-class CallingThread(Executor):
-    """Runs a job in the thread that hands it over, ``k`` at once."""
-
-    name = "threads"
-
-    def __init__(self, k: int):
-        super().__init__()
-        self.k = k
-
-    def slots(self, system: Any) -> int:
-        return self.k
-
-    def _run(self, job: RunJob) -> RunOutput:
-        return run_job(job)
 
 
 class Capped(Executor):
@@ -93,7 +77,7 @@ def measure(k: int, base: Executor | None, args: argparse.Namespace, workdir: Pa
     settings = SearchSettings(tolerance_pct=args.tolerance_pct, max_trials=args.max_trials)
     rows = []
     for repeat in range(repeats):
-        executor = CallingThread(k) if base is None else Capped(base, k)
+        executor = InProcessSlots(k) if base is None else Capped(base, k)
         system = SleepySlam(sleep_s=args.sleep)
         runner = TrialRunner(dataset, fog.visibility_m.ref(), system, requirement, workdir=workdir / f"k{k}-{repeat}", executor=executor)
         start = time.perf_counter()

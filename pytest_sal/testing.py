@@ -23,10 +23,12 @@ from typing import Any
 
 import numpy as np
 
+from pytest_sal.engine.executor import Executor
+from pytest_sal.engine.run_job import RunJob, RunOutput, run_job
 from sal_adapters import Sequence
 from sal_wrappers.base import RunResult, SlamSystem, StopCheck, TrackState
 
-__all__ = ["FakeSlam", "LostWorkerSlam", "SleepySlam", "applied_value"]
+__all__ = ["FakeSlam", "InProcessSlots", "LostWorkerSlam", "SleepySlam", "applied_value"]
 
 
 def applied_value(sequence: Sequence, address: str) -> float | None:
@@ -179,3 +181,22 @@ class LostWorkerSlam(FakeSlam):
             time.sleep(3600)
         result = super().run(sequence, workdir, timeout)
         return dataclasses.replace(result, info={**result.info, "code": __file__})
+
+
+class InProcessSlots(Executor):
+    """An executor that runs each job in the thread that hands it over and says ``k`` runs fit
+    at once: the trial runner and the search bring the threads. For tests and benchmarks of the
+    parallel search without Ray (with a system whose runs sleep, the scheduling is measured
+    beyond the machine's cores)."""
+
+    name = "in-process"
+
+    def __init__(self, k: int):
+        super().__init__()
+        self.k = k
+
+    def slots(self, system: SlamSystem) -> int:
+        return self.k
+
+    def _run(self, job: RunJob) -> RunOutput:
+        return run_job(job)

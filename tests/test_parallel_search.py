@@ -9,7 +9,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
 import pytest
@@ -18,14 +18,12 @@ from hypothesis import strategies as st
 
 from pytest_sal import tracking_rate
 from pytest_sal.engine.boundary_search import SearchResult, SearchSpace, _Search, boundary_search
-from pytest_sal.engine.executor import Executor
 from pytest_sal.engine.outcome import Outcome
 from pytest_sal.engine.requirement_runner import SearchSettings, run_search, search_outcome, search_width
 from pytest_sal.engine.requirements import Requirement
-from pytest_sal.engine.run_job import RunJob, RunOutput, run_job
 from pytest_sal.engine.trial_runner import TrialRunner, VotePolicy
 from pytest_sal.report.formatting import trial_line
-from pytest_sal.testing import FakeSlam
+from pytest_sal.testing import FakeSlam, InProcessSlots
 from sal_adapters import open_dataset
 from sal_modules import fog
 
@@ -294,28 +292,12 @@ def test_a_noisy_search_confirms_the_edge_and_both_final_ends_at_every_width(k: 
 # -- through the TrialRunner: an executor with k free slots ------------------------------------------------------
 
 
-class InProcess(Executor):
-    """Runs jobs here, ``k`` at once (the runner and the search bring the threads)."""
-
-    name = "in-process"
-
-    def __init__(self, k: int):
-        super().__init__()
-        self.k = k
-
-    def slots(self, system: Any) -> int:
-        return self.k
-
-    def _run(self, job: RunJob) -> RunOutput:
-        return run_job(job)
-
-
 def fake_runner(tmp_path: Path, k: int, runs: int | None = None) -> TrialRunner:
     dataset = open_dataset("synthetic", scene="indoor", frames=8, sensor="rgbd")
     requirement = Requirement.build([tracking_rate >= 0.5, fog.visibility_m >= 25], search_range=(1.0, 200.0))
     system = FakeSlam()  # tracks round(8 * v / 40) of 8 frames: passes from 17.5 m (4 of 8), fails below
     return TrialRunner(
-        dataset, fog.visibility_m.ref(), system, requirement, runs=runs, workdir=tmp_path / f"work{k}", executor=InProcess(k)
+        dataset, fog.visibility_m.ref(), system, requirement, runs=runs, workdir=tmp_path / f"work{k}", executor=InProcessSlots(k)
     )
 
 
