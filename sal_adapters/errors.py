@@ -46,6 +46,11 @@ class WriteError(SalError, OSError):
     def __str__(self) -> str:
         return f"cannot write {self.filename}: {self.strerror}"
 
+    def __reduce__(self) -> tuple[type[WriteError], tuple[str, OSError]]:
+        """Pickled as its path and cause, so one raised in another process (a Ray worker)
+        comes back whole."""
+        return WriteError, (self.filename, OSError(self.errno, self.strerror))
+
 
 class DatasetWarning(UserWarning):
     """Something in a dataset was skipped or guessed (a missing image, assumed intrinsics)."""

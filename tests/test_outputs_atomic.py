@@ -107,3 +107,14 @@ def test_recover_puts_back_an_old_version_and_removes_dead_leftovers(tmp_path: P
 
     assert (tmp_path / "out" / "kept.txt").read_text() == "previous"
     assert sorted(os.listdir(tmp_path)) == sorted(["out", running.name])
+
+
+def test_a_write_error_pickles_whole() -> None:
+    """A WriteError raised where a run happened (a Ray worker) comes back to the controller whole."""
+    import errno
+    import pickle
+
+    error = WriteError("/data/out/x.png", OSError(errno.ENOSPC, "No space left on device"))
+    back = pickle.loads(pickle.dumps(error))
+    assert isinstance(back, WriteError) and str(back) == "cannot write /data/out/x.png: No space left on device"
+    assert (back.errno, back.filename) == (errno.ENOSPC, "/data/out/x.png")
