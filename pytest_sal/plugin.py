@@ -81,7 +81,7 @@ def pytest_report_header(config: pytest.Config) -> list[str]:
     workers than cores, or a machine already busy): such runs fall behind the sensor clock;
     they are re-paced and marked, and take longer."""
     session: SalSession = config.stash[SAL_SESSION]
-    lines = [f"pytest-sal: runs on {session.executor.describe()}"] if session.options.executor != "local" else []
+    lines = [f"pytest-sal: runs on {session.executor().describe()}"] if session.options.executor != "local" else []
     if session.default_system_name() != "orbslam3" or session.options.executor != "local":
         return lines
     from sal_wrappers import oversubscribed_warning

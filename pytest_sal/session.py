@@ -57,10 +57,10 @@ class SalSession:
             self._cache = ContentCache(self.options.cache_dir, self.options.cache_size)
         return self._cache
 
-    @property
     def executor(self) -> Executor:
         """Where runs happen (``--sal-executor``), made when first needed; a local Ray starts
-        on its first run, not here."""
+        on its first run, not here. A method, not a property: pytest 8.0 reads every attribute
+        of a registered plugin, which would make it (and import numpy) in every session."""
         if self._executor is None:
             from pytest_sal.engine.executor_factory import make_executor
 
@@ -75,8 +75,9 @@ class SalSession:
         started here once and its address handed to the workers, so ``-n N`` lets N tests
         submit at once without N clusters."""
         if self.options.executor == "ray" and not self.options.ray_address:
-            self.executor.connect()  # type: ignore[attr-defined]
-            node.workerinput["sal_ray_address"] = self.executor.address  # type: ignore[attr-defined]
+            executor = self.executor()
+            executor.connect()  # type: ignore[attr-defined]
+            node.workerinput["sal_ray_address"] = executor.address  # type: ignore[attr-defined]
 
     def close(self) -> None:
         """Release the executor (shut down a local Ray this process started)."""
@@ -141,7 +142,7 @@ class SalSession:
             kitti_segments=self.options.kitti_segments,
             early_stop=self.options.early_stop,
             progress=trial_printer(self.config, item.nodeid, ref.label, ref.unit, metrics),
-            executor=self.executor,
+            executor=self.executor(),
         )
 
     def search(self, item: pytest.Item, dataset: Any, system: Any, runs: int | None, workdir: Path) -> Any:

@@ -70,25 +70,29 @@ def test_sal_evaluate_on_ray_needs_the_cache(capsys: pytest.CaptureFixture[str])
 
 def test_sal_boundary_on_ray_finds_the_local_interval(tmp_path: Path) -> None:
     """``sal boundary --executor ray`` (a local Ray for the command) brackets the fake's known
-    20 m boundary exactly as the local executor does; its trial path is the sequential one."""
-    from ray_clusters import ray_environment
+    20 m boundary exactly as the local executor does; its trial path is the sequential one.
+    Each command runs in its own interpreter, as a user runs it (the fake registered first)."""
+    import os
+    import subprocess
+    import sys
+
     from test_boundary_command import STEP, boundary, read_summary, write_config
 
-    from pytest_sal.cli.main import main
-    from pytest_sal.testing import FakeSlam
-    from sal_wrappers import SYSTEMS
-
-    SYSTEMS.register("fake", FakeSlam)
-    try:
-        config = write_config(tmp_path)
-        folder = tmp_path / "results" / "fogb" / "robustness_boundary" / "fake" / "fog_sweep_visibility_m"
-        assert main([*boundary(tmp_path / "local", "--slam-option", STEP, config=config)]) == 0
-        local = read_summary(folder).outcome
-        with ray_environment():
-            assert main([*boundary(tmp_path / "ray", "--slam-option", STEP, config=config), "--executor", "ray"]) == 0
-        on_ray = read_summary(folder).outcome
-    finally:
-        SYSTEMS.unregister("fake")
+    config = write_config(tmp_path)
+    folder = tmp_path / "results" / "fogb" / "robustness_boundary" / "fake" / "fog_sweep_visibility_m"
+    register = (
+        "import sys; from pytest_sal.testing import FakeSlam; from sal_wrappers import SYSTEMS; SYSTEMS.register('fake', FakeSlam); "
+        "from pytest_sal.cli.main import main; raise SystemExit(main(sys.argv[1:]))"
+    )
+    environment = dict(os.environ, RAY_AUTH_TOKEN=TOKEN)
+    environment.pop("RAY_AUTH_MODE", None)
+    outcomes = []
+    for name, extra in (("local", []), ("ray", ["--executor", "ray"])):
+        command = [sys.executable, "-c", register, *boundary(tmp_path / name, "--slam-option", STEP, config=config), *extra]
+        done = subprocess.run(command, capture_output=True, text=True, env=environment, timeout=300)
+        assert done.returncode == 0, done.stderr[-2000:]
+        outcomes.append(read_summary(folder).outcome)
+    local, on_ray = outcomes
     assert (on_ray.boundary.pass_value, on_ray.boundary.fail_value, on_ray.termination) == (
         local.boundary.pass_value,
         local.boundary.fail_value,
