@@ -139,15 +139,19 @@ class VotePolicy:
     def more(self, passes: int, fails: int, confirming: bool = False, abstained: int = 0) -> bool:
         """Another run is needed: the lead is short (or no run voted) and runs are left; runs
         that abstained (starved by the machine) count against the cap."""
-        lead, cap = (self.confirm_lead, self.confirm_runs or self.max_runs + 2) if confirming else (self.lead, self.max_runs)
+        lead, cap = self._limits(confirming)
         short = abs(passes - fails) < lead if self.noisy else passes + fails == 0
         return short and passes + fails + abstained < cap
+
+    def _limits(self, confirming: bool) -> tuple[int, int]:
+        """The lead a verdict needs and the most runs: ``confirm_lead`` / ``confirm_runs`` when confirming."""
+        return (self.confirm_lead, self.confirm_runs or self.max_runs + 2) if confirming else (self.lead, self.max_runs)
 
     def needed(self, passes: int, fails: int, confirming: bool = False, abstained: int = 0) -> int:
         """The fewest more runs after which the vote could be settled (at least 1 while
         ``more``): running that many at once gives the verdict the runs one by one would, since
         each run moves the lead by at most one."""
-        lead, cap = (self.confirm_lead, self.confirm_runs or self.max_runs + 2) if confirming else (self.lead, self.max_runs)
+        lead, cap = self._limits(confirming)
         short = lead - abs(passes - fails) if self.noisy else 1
         return max(1, min(short, cap - passes - fails - abstained))
 
