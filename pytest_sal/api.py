@@ -37,6 +37,9 @@ def require(
     runs: int | None = None,
     search_range: tuple[float, float] | None = None,
     seed: int | None = None,
+    reliability: float | None = None,
+    confidence: float | None = None,
+    max_runs: int | None = None,
 ) -> Callable[[F], F]:
     """The system must meet every criterion wherever the envelope holds.
 
@@ -45,12 +48,24 @@ def require(
     end of the search range locates the failure boundary within ``tolerance`` (parameter unit;
     default: ini ``sal_tolerance`` percent of the edge) in at most ``max_trials`` trials of
     ``runs`` runs each. Without an envelope, use it with ``sal.sweep`` or ``sal.at``.
+
+    A noisy system (ORB-SLAM3) holds a requirement with a probability that falls with
+    severity: the test passes when ``p(edge) >= reliability`` at ``confidence`` (one-sided;
+    ini ``sal_reliability``, ``sal_confidence``), fails when ``p(edge) < reliability`` at that
+    confidence, and is inconclusive when ``max_runs`` runs (ini ``sal_max_runs``) did not
+    settle it; the outcome reports ``s_R``, the most severe value where ``p >= reliability``.
     """
-    options = {
-        k: v
-        for k, v in {"tolerance": tolerance, "max_trials": max_trials, "runs": runs, "search_range": search_range, "seed": seed}.items()
-        if v is not None
+    given = {
+        "tolerance": tolerance,
+        "max_trials": max_trials,
+        "runs": runs,
+        "search_range": search_range,
+        "seed": seed,
+        "reliability": reliability,
+        "confidence": confidence,
+        "max_runs": max_runs,
     }
+    options = {k: v for k, v in given.items() if v is not None}
     requirement = Requirement.build(criteria_and_envelope, **options)
 
     def decorate(function: F) -> F:

@@ -191,6 +191,9 @@ INI_KEYS: tuple[tuple[str, str, str | None], ...] = (
     ("sal_compare_missing", "pass or fail: a test with no baseline to compare with (default pass)", "pass"),
     ("sal_tolerance", "default search tolerance: the bracket's width in percent of its larger end (default 10)", "10"),
     ("sal_max_trials", "default trial budget of a boundary search (default 8)", "8"),
+    ("sal_reliability", "noisy systems: the share of runs that must hold the requirement at the envelope's edge (default 0.8)", "0.8"),
+    ("sal_confidence", "noisy systems: the one-sided confidence that this reliability is met (default 0.9)", "0.9"),
+    ("sal_max_runs", "noisy systems: the most runs of one requirement's search (default 30)", "30"),
     (
         "sal_runs",
         "the most runs per trial; runs vote until one verdict leads by 2 (default auto: 1 for a deterministic system, 5 for a noisy one)",
@@ -221,6 +224,9 @@ _INI_NUMBERS: dict[str, tuple[type, float, bool, str]] = {
     "sal_seed": (int, 0, False, "a whole number >= 0 (perturbation seed)"),
     "sal_max_trials": (int, 1, False, "a whole number >= 1 (trials per boundary search)"),
     "sal_tolerance": (float, 0.0, True, "a number > 0 (percent of the boundary value)"),
+    "sal_reliability": (float, 0.0, True, "a probability between 0 and 1 (the share of runs that must hold)"),
+    "sal_confidence": (float, 0.5, True, "a probability between 0.5 and 1 (one-sided confidence)"),
+    "sal_max_runs": (int, 1, False, "a whole number >= 1 (runs per search of a noisy system)"),
     "sal_timeout": (float, 0.0, True, "a number > 0 (seconds per SLAM run)"),
 }
 
@@ -312,7 +318,13 @@ def read_options(config: pytest.Config) -> SalOptions:
         early_stop=not option.sal_no_early_stop and _ini_bool(config, "sal_early_stop"),
         system_name=config.getini("sal_system") or None,
         kitti_segments=_ini_segments(config),
-        search=SearchSettings(tolerance_pct=_ini_number(config, "sal_tolerance"), max_trials=int(_ini_number(config, "sal_max_trials"))),
+        search=SearchSettings(
+            tolerance_pct=_ini_number(config, "sal_tolerance"),
+            max_trials=int(_ini_number(config, "sal_max_trials")),
+            reliability=_ini_probability(config, "sal_reliability"),
+            confidence=_ini_probability(config, "sal_confidence"),
+            max_runs=int(_ini_number(config, "sal_max_runs")),
+        ),
         report_md=Path(option.sal_report_md) if option.sal_report_md else None,
         report_html=Path(option.sal_report_html) if option.sal_report_html else None,
         executor=_executor(config),
@@ -385,6 +397,14 @@ def _ini_number(config: pytest.Config, name: str) -> float:
     if value is None or not math.isfinite(value) or value < smallest or (exclusive and value == smallest):
         raise pytest.UsageError(f"pytest-sal: ini option {name} = {text!r}: expected {what}")
     return float(value) if kind is float else int(value)
+
+
+def _ini_probability(config: pytest.Config, name: str) -> float:
+    """The ini key ``name`` as a probability below 1 (``_ini_number`` checks the lower end)."""
+    value = _ini_number(config, name)
+    if value >= 1:
+        raise pytest.UsageError(f"pytest-sal: ini option {name} = {value:g}: expected {_INI_NUMBERS[name][3]}")
+    return value
 
 
 def _ini_bool(config: pytest.Config, name: str) -> bool:

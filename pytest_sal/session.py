@@ -162,7 +162,7 @@ class SalSession:
         from pytest_sal.engine.requirement_runner import single_outcome
 
         runner = self._runner(item, ref, dataset, system, runs, workdir)
-        outcome = single_outcome(runner, item.function.sal_requirement, item.nodeid, value)  # type: ignore[attr-defined]
+        outcome = single_outcome(runner, item.function.sal_requirement, item.nodeid, value, self.options.search)  # type: ignore[attr-defined]
         return self._finished(outcome, system)
 
     def _start_from(self, key: tuple[str, str, str]) -> Any:

@@ -28,7 +28,7 @@ from pytest_sal.engine.run_job import RunJob, RunOutput, run_job
 from sal_adapters import Sequence
 from sal_wrappers.base import RunResult, SlamSystem, StopCheck, TrackState
 
-__all__ = ["FakeSlam", "InProcessSlots", "LostWorkerSlam", "SleepySlam", "applied_value"]
+__all__ = ["BernoulliSlam", "FakeSlam", "InProcessSlots", "LostWorkerSlam", "SleepySlam", "applied_value"]
 
 
 def applied_value(sequence: Sequence, address: str) -> float | None:
@@ -117,6 +117,60 @@ class FakeSlam(SlamSystem):
             wall_time_s=time.perf_counter() - start,
             track_time_s=0.0,
             info={"value": value, "share": share},
+        )
+
+
+class BernoulliSlam(FakeSlam):
+    """A noisy fake with a known chance of holding: each run tracks every frame with
+    probability ``held(value)`` (an expression in ``v``, 0..1), else only ``late`` of them (it
+    initialised late, as ORB-SLAM3 does). The draw of run number ``k`` of this instance is
+    seeded by ``(seed, k, value)``, so a test knows the truth ``p(v)`` and the runs repeat."""
+
+    name = "bernoulli"
+    description = "noisy fake SLAM: every run holds with a known probability p(severity)"
+
+    def __init__(
+        self,
+        parameter: str = "fog.visibility_m",
+        held: str = "1 if v >= 20 else 0.5",
+        late: float = 0.5,
+        seed: int = 0,
+        calls_file: str | None = None,
+    ):
+        super().__init__(parameter, held, calls_file=calls_file)
+        self.late, self.seed = float(late), int(seed)
+        self.deterministic = False  # type: ignore[misc]
+
+    def options(self) -> dict[str, Any]:
+        return {"parameter": self.parameter, "held": self.tracked, "late": self.late, "seed": self.seed}
+
+    def run(self, sequence: Sequence, workdir: Path, timeout: float | None = None, stop: StopCheck | None = None) -> RunResult:
+        """Track every frame, or from ``(1 - late) * n`` on (see the class text)."""
+        value = applied_value(sequence, self.parameter)
+        p = 1.0 if value is None else float(np.clip(self._share(value), 0.0, 1.0))
+        draw = np.random.default_rng([self.seed, self._runs, int(round(1000 * abs(value or 0)))]).random()
+        self._runs += 1
+        if self.calls_file:
+            with open(self.calls_file, "a", encoding="utf-8") as handle:
+                handle.write(json.dumps({"value": value, "pid": os.getpid(), "parent": os.getppid()}) + "\n")
+        n = len(sequence)
+        start = 0 if draw < p else int(round(n * (1 - self.late)))
+        states = np.full(n, TrackState.OK, dtype=np.int8)
+        states[:start] = TrackState.NOT_INITIALISED
+        trajectory = None
+        if sequence.groundtruth is not None and sequence.groundtruth_is_per_frame and start < n:
+            trajectory = sequence.groundtruth.select(list(range(start, n)))
+        return RunResult(
+            system=self.name,
+            sequence=sequence.name,
+            sensor=sequence.sensor,
+            timestamps=sequence.timestamps,
+            states=states,
+            trajectory=trajectory,
+            maps=1,
+            wall_time_s=0.0,
+            track_time_s=0.0,
+            info={"value": value, "held_p": p},
         )
 
 

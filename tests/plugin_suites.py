@@ -20,13 +20,14 @@ import pytest
 MODES = [pytest.param([], id="serial"), pytest.param(["-n", "2"], id="xdist")]
 
 #: conftest of the inner suites: the fake per test name from tracked.json (a tracked
-#: expression, or FakeSlam keyword arguments), every SLAM run appended to calls.jsonl
+#: expression, or FakeSlam keyword arguments, or BernoulliSlam's with "held"), every SLAM run
+#: appended to calls.jsonl
 CONFTEST = """
 import json
 from pathlib import Path
 
 import pytest
-from pytest_sal.testing import FakeSlam
+from pytest_sal.testing import BernoulliSlam, FakeSlam
 
 HERE = Path(__file__).parent
 
@@ -37,7 +38,8 @@ def sal_system(request):
     table = json.loads(path.read_text()) if path.exists() else {}
     spec = table.get(request.node.originalname, table.get("*", "min(1, v / 40)"))
     options = {"tracked": spec} if isinstance(spec, str) else dict(spec)
-    return FakeSlam(calls_file=str(HERE / "calls.jsonl"), **options)
+    system = BernoulliSlam if "held" in options else FakeSlam
+    return system(calls_file=str(HERE / "calls.jsonl"), **options)
 """
 
 #: a 20-frame urban world instead of the default 60 frames (cheaper trials)

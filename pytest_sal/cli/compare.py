@@ -32,7 +32,7 @@ Exit status: 0 no regression, 1 a regression, 2 a bad argument or an unknown run
 """
 
 #: ``Outcome.verdict`` from best to worst
-VERDICT_RANK = {"passed": 0, "flaky": 1, "failed": 2}
+VERDICT_RANK = {"passed": 0, "inconclusive": 1, "flaky": 1, "failed": 2}
 
 
 def add_compare_commands(commands: argparse._SubParsersAction) -> None:

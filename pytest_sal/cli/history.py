@@ -36,7 +36,7 @@ survives) nor the newest run.
 Runs are saved by pytest-sal sessions under .sal/history (one JSON file per session run).
 """
 
-VERDICT_COLOURS = {"passed": "#2ca02c", "failed": "#d62728", "flaky": "#ff7f0e"}
+VERDICT_COLOURS = {"passed": "#2ca02c", "failed": "#d62728", "inconclusive": "#ff7f0e", "flaky": "#ff7f0e"}
 BAND_COLOUR = "#1f77b4"
 
 
@@ -266,7 +266,7 @@ def history_figure(trend: list[tuple[RunRecord, Outcome]], *, title: str | None 
     for tick, (_, outcome) in zip(ax.get_xticklabels(), shown):
         tick.set_color(VERDICT_COLOURS.get(outcome.verdict, "0.2"))
     ax.set_xlim(-0.6, len(shown) - 0.4)
-    ax.set_xlabel("run (tick colour: verdict at the edge, green passed / red failed / orange flaky)", fontsize="small")
+    ax.set_xlabel("run (tick colour: verdict at the edge, green passed / red failed / orange inconclusive)", fontsize="small")
     arrow = "\u2193" if severe_down else "\u2191"
     ax.set_ylabel(f"{latest.parameter}" + (f" [{unit}]" if unit else "") + f"   (more severe {arrow})")
     ax.set_title(title or f"{latest.test_id}\n{latest.system} on {latest.dataset}", fontsize="medium")

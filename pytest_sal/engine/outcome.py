@@ -135,6 +135,30 @@ class Trial:
         """Runs that voted (all but the starved ones)."""
         return self.passes + self.fails
 
+    def failure_summary(self) -> str:
+        """The runs that held and why the others failed, grouped by kind: ``4 of 6 runs held;
+        2 initialised late (first pose at frame 28-33)``. Kinds: the run failed (its reason),
+        initialised late (first pose at frame 5 or later), stopped early (why), else lost
+        tracking or a large ATE (the ranges of the runs' values)."""
+        failed = [r for r in self.runs if not r.get("passed") and not r.get("abstained")]
+        text = f"{self.passes} of {self.voting} run{'s' if self.voting != 1 else ''} held"
+        if self.abstained:
+            text += f" ({self.abstained} starved by the machine, not counted)"
+        kinds: dict[str, list[dict[str, Any]]] = {}
+        for run in failed:
+            kinds.setdefault(_failure_kind(run), []).append(run)
+        parts = []
+        for kind, runs in kinds.items():
+            if kind == "late":
+                parts.append(f"{len(runs)} initialised late (first pose at frame {_span([r['first_tracked'] for r in runs], 'g')})")
+            elif kind == "tracking":
+                parts.append(f"{len(runs)} lost tracking (tracking rate {_span([r.get('tracking_rate') for r in runs], '.2f')})")
+            elif kind == "ate":
+                parts.append(f"{len(runs)} drifted (ATE {_span([r.get('ate_rmse') for r in runs], '.3g')} m)")
+            else:
+                parts.append(f"{len(runs)} {kind}")
+        return text + ("; " + ", ".join(parts) if parts else "")
+
     def votes(self) -> str:
         """``3 of 3 runs passed``, ``2 of 3 runs failed``: the runs behind the verdict."""
         voting = self.voting
@@ -145,16 +169,52 @@ class Trial:
 @dataclass
 class Boundary:
     """The failure boundary lies between ``pass_value`` and ``fail_value`` (either may be
-    ``None`` when the search range did not bracket it)."""
+    ``None`` when the search range did not bracket it).
+
+    A noisy system's boundary is statistical (``noisy``; ``pytest_sal.engine.reliability_curve``):
+    ``estimate`` is ``s_R`` (the most severe value where the chance ``p`` that a run holds the
+    requirement is at least ``reliability``), ``bound`` its one-sided bound ``s_R/C`` at
+    ``confidence`` (``s_R`` is at least this severe with that confidence), ``interval`` the
+    equal-tailed interval of ``s_R`` at ``confidence``, ``s50`` / ``s50_interval`` the same for
+    ``p = 0.5``, ``transition`` the values where ``p`` has fallen by 10 % and by 90 % of its
+    drop, ``holds_at_edge`` the confidence that ``p(edge) >= reliability``, ``runs`` the runs
+    fitted, ``curve`` rows ``(value, median p, low, high)`` of the fitted curve and its band,
+    and ``search_range`` / ``log_scale`` / ``grid_step`` the axis the curve was fitted on (to
+    refit it from the trials' runs). A value at an end of ``search_range`` may lie beyond it.
+    ``pass_value`` is then ``bound`` and ``fail_value`` the bound on the severe side (``s_R``
+    is milder than it with ``confidence``).
+    """
 
     pass_value: float | None
     fail_value: float | None
     unit: str = ""
+    estimate: float | None = None
+    bound: float | None = None
+    interval: list[float] | None = None
+    reliability: float | None = None
+    confidence: float | None = None
+    runs: int | None = None
+    s50: float | None = None
+    s50_interval: list[float] | None = None
+    transition: list[float] | None = None
+    holds_at_edge: float | None = None
+    curve: list[list[float]] | None = None
+    search_range: list[float] | None = None
+    log_scale: bool | None = None
+    grid_step: float | None = None
+
+    @property
+    def noisy(self) -> bool:
+        """A statistical boundary (a noisy system's fitted curve)."""
+        return self.reliability is not None
 
     def text(self) -> str:
         """The interval in words: ``14-16 m`` (``-3.5 to -1.25 m`` when it reaches below 0),
         ``beyond 1 m (passed everywhere searched)``, ``beyond 1e+05 m (failed everywhere
-        searched)``, ``unknown``."""
+        searched)``, ``unknown``; a noisy system's ``s80/90 >= 540 particles (s80 610; s50 790,
+        700-900)`` (``statistical_text``)."""
+        if self.noisy:
+            return self.statistical_text()
         if self.pass_value is not None and self.fail_value is not None:
             lo, hi = sorted((self.pass_value, self.fail_value))
             return f"{num(lo)}{'-' if lo >= 0 else ' to '}{with_unit(hi, self.unit)}"
@@ -164,11 +224,51 @@ class Boundary:
             return f"beyond {with_unit(self.fail_value, self.unit)} (failed everywhere searched)"
         return "unknown"
 
+    def statistical_text(self) -> str:
+        """``s80/90 >= 540 particles (s80 610; s50 790, 700-900)``: the one-sided bound, then the
+        point estimates and ``s50``'s interval (``<=`` where lower values are more severe);
+        ``s80/90 beyond 1000 particles`` when the bound lies past the severe end,
+        ``s80/90 not reached (...)`` when ``p`` may be below 80 % from the mild end on."""
+        assert self.reliability is not None and self.confidence is not None and self.search_range
+        mild, severe = self.search_range
+        name = f"s{_pct(self.reliability)}/{_pct(self.confidence)}"
+        sign = ">=" if severe > mild else "<="
+        if self.bound is None or self._at(self.bound, severe):
+            head = f"{name} beyond {with_unit(severe, self.unit)} (searched to there)"
+        elif self._at(self.bound, mild):
+            head = f"{name} not reached (p may be below {_pct(self.reliability)} % from {with_unit(mild, self.unit)} on)"
+        else:
+            head = f"{name} {sign} {with_unit(self.bound, self.unit)}"
+        estimate = f"s{_pct(self.reliability)} {self._value(self.estimate)}"
+        if self.s50_interval:
+            low, high = sorted(self.s50_interval)
+            s50 = f"s50 {self._value(self.s50)}, {self._value(low)} to {self._value(high)}"
+            estimate = s50 if self.reliability == 0.5 else f"{estimate}; {s50}"
+        return f"{head} ({estimate})"
+
+    def _at(self, value: float, end: float) -> bool:
+        return math.isclose(value, end, rel_tol=1e-9, abs_tol=1e-12)
+
+    def _value(self, value: float | None) -> str:
+        """A value of the fitted curve with its unit, or ``beyond 1000 particles`` / ``before 0
+        particles`` at an end of the range."""
+        if value is None or not self.search_range:
+            return with_unit(value, self.unit)
+        mild, severe = self.search_range
+        if self._at(value, severe):
+            return f"beyond {with_unit(severe, self.unit)}"
+        if self._at(value, mild):
+            return f"before {with_unit(mild, self.unit)}"
+        return with_unit(value, self.unit)
+
     def short_text(self, worse: str, *, single: bool = False) -> str:
         """The interval for a table cell: ``14-16 m`` as ``text``; one-sided as a bound on
         the severe side (``worse``: ``lower`` or ``higher`` values are more severe), ``< 1 m
         (never failed)`` or ``> 1e+05 m (never passed)``; ``passed at 3 px`` or ``failed at 3
-        px`` when ``single`` (one sweep level or ``sal.at`` point was tried)."""
+        px`` when ``single`` (one sweep level or ``sal.at`` point was tried); a noisy system's
+        ``statistical_text`` (``p 0.93 (0.81-0.99)`` at a single point)."""
+        if self.noisy and not single:
+            return self.statistical_text()
         if (self.pass_value is None) == (self.fail_value is None):
             return self.text()
         if single:
@@ -179,6 +279,33 @@ class Boundary:
         if self.pass_value is not None:
             return f"{'<' if severe_below else '>'} {with_unit(self.pass_value, self.unit)} (never failed)"
         return f"{'>' if severe_below else '<'} {with_unit(self.fail_value, self.unit)} (never passed)"
+
+
+def _failure_kind(run: dict[str, Any]) -> str:
+    """What kind of failure a failed run shows (``Trial.failure_summary``)."""
+    if run.get("failure"):
+        return f"failed: {str(run['failure']).split(';')[0][:80]}"
+    first = run.get("first_tracked")
+    if isinstance(first, (int, float)) and first >= 5:
+        return "late"
+    if run.get("stopped"):
+        return f"stopped early: {str(run['stopped'])[:80]}"
+    rate = run.get("tracking_rate")
+    return "tracking" if isinstance(rate, (int, float)) and rate < 0.95 else "ate"
+
+
+def _span(values: list[Any], spec: str) -> str:
+    """``28-33`` (or ``30``) over the known numbers of ``values``; ``-`` when none is known."""
+    known = sorted(float(v) for v in values if isinstance(v, (int, float)) and math.isfinite(v))
+    if not known:
+        return "-"
+    low, high = format(known[0], spec), format(known[-1], spec)
+    return low if low == high else f"{low}-{high}"
+
+
+def _pct(probability: float) -> str:
+    """``0.9`` -> ``90``, ``0.975`` -> ``97.5``."""
+    return f"{100 * probability:.4g}"
 
 
 @dataclass
@@ -194,7 +321,8 @@ class Outcome:
         requirement: the requirement in words; ``criteria`` its pass criteria as
             ``(metric, op, threshold)`` and ``envelope`` its envelope without the parameter
             (``>= 25 m``; empty without one).
-        verdict: ``passed``, ``failed`` or ``flaky``.
+        verdict: ``passed``, ``failed`` or ``inconclusive`` (a noisy system's runs did not
+            settle whether ``p(edge) >= reliability``; ``flaky`` in history written before).
         boundary: the interval found.
         termination: ``tolerance``, ``max_trials``, ``not_bracketed``, ``domain_resolution``
             (``single`` for a sweep level or ``sal.at`` point).
@@ -268,7 +396,12 @@ class Outcome:
     def confidence(self) -> str:
         """How sure the result is, from the runs behind the deciding verdicts:
         ``edge 3 of 3 runs passed; pass end 3 of 3 runs passed, fail end 4 of 5 runs failed``,
-        or ``1 run per trial`` (a deterministic system)."""
+        or ``1 run per trial`` (a deterministic system); a noisy system's ``p >= 80 % at the edge
+        with confidence 97.3 % (30 runs)``."""
+        b = self.boundary
+        if b.noisy and b.holds_at_edge is not None and b.reliability is not None:
+            where = "at the edge" if self.termination != "single" else "here"
+            return f"p >= {_pct(b.reliability)} % {where} with confidence {100 * b.holds_at_edge:.3g} % ({b.runs} runs)"
         if not self.trials or all(len(t.runs) <= 1 for t in self.trials):
             return "1 run per trial"
         parts = [f"edge {self.trials[0].votes()}" if self.termination != "single" else self.trials[0].votes()]

@@ -21,17 +21,24 @@ __all__ = ["SearchSettings", "failure_message", "run_search", "search_outcome", 
 
 @dataclass(frozen=True)
 class SearchSettings:
-    """Defaults a requirement may override (ini ``sal_tolerance``, ``sal_max_trials``).
+    """Defaults a requirement may override (ini ``sal_tolerance``, ``sal_max_trials``,
+    ``sal_reliability``, ``sal_confidence``, ``sal_max_runs``).
 
     Attributes:
         tolerance_pct: default tolerance: the search stops when the bracket's width is at most
             this percent of its larger end (20-22 m at 10 %), which suits linear parameters and
             ones searched over decades (0.08-0.09 Mbit/s) alike.
-        max_trials: default trial budget.
+        max_trials: default trial budget (a deterministic system's bisection).
+        reliability, confidence: a noisy system meets its requirement at the edge when
+            ``p(edge) >= reliability`` with this one-sided confidence.
+        max_runs: default run budget of a noisy system's search.
     """
 
     tolerance_pct: float = 10.0
     max_trials: int = 8
+    reliability: float = 0.8
+    confidence: float = 0.9
+    max_runs: int = 30
 
 
 def search_space(ref: ParamRef, search_range: tuple[float, float] | None = None) -> SearchSpace:
@@ -64,13 +71,7 @@ def run_search(
     tolerance = requirement.options.get("tolerance")
     rel_tolerance = None if tolerance is not None else settings.tolerance_pct / 100
     max_trials = requirement.options.get("max_trials", settings.max_trials)
-    unchanged = runner.unchanged_frames(envelope.value)
-    if unchanged is not None:
-        raise InvalidRequirement(
-            f"{envelope}: the envelope's edge leaves the frames of {runner.dataset.name} unchanged (frames "
-            f"{', '.join(map(str, unchanged))} differ from the clean ones by rounding only), so the test would pass whatever "
-            f"the system does; bound a severity that perturbs this dataset"
-        )
+    _refuse_unchanged(runner, requirement)
 
     def evaluate(value: float) -> tuple[bool, Trial]:
         trial = runner.evaluate(value)
@@ -94,6 +95,19 @@ def run_search(
     return result
 
 
+def _refuse_unchanged(runner: TrialRunner, requirement: Requirement) -> None:
+    """``InvalidRequirement`` when the envelope's edge leaves the frames unchanged."""
+    envelope = requirement.envelope
+    assert envelope is not None
+    unchanged = runner.unchanged_frames(envelope.value)
+    if unchanged is not None:
+        raise InvalidRequirement(
+            f"{envelope}: the envelope's edge leaves the frames of {runner.dataset.name} unchanged (frames "
+            f"{', '.join(map(str, unchanged))} differ from the clean ones by rounding only), so the test would pass whatever "
+            f"the system does; bound a severity that perturbs this dataset"
+        )
+
+
 def search_outcome(
     runner: TrialRunner,
     requirement: Requirement,
@@ -101,7 +115,10 @@ def search_outcome(
     test_id: str,
     warm_start: tuple[float | None, float | None] | None = None,
 ) -> Outcome:
-    """Run the boundary search of ``requirement`` with ``runner`` and describe what it found."""
+    """Run the boundary search of ``requirement`` with ``runner`` and describe what it found
+    (a noisy system's: the curve of its chance to hold, ``reliability_outcome``)."""
+    if runner.policy.noisy:
+        return _noisy_outcome(runner, requirement, settings, test_id, requirement.envelope.value)  # type: ignore[union-attr]
     result = run_search(runner, requirement, settings, warm_start)
     verdict = "flaky" if result.flaky else "passed" if result.edge_passed else "failed"
     boundary = Boundary(result.pass_value, result.fail_value, runner.ref.unit)
@@ -109,13 +126,36 @@ def search_outcome(
     return _outcome(runner, requirement, test_id, verdict, boundary, result.termination, trials, result.contradictions)
 
 
-def single_outcome(runner: TrialRunner, requirement: Requirement, test_id: str, value: float) -> Outcome:
-    """The outcome of one explicit point (``sal.sweep`` level or ``sal.at``), its verdict
-    confirmed like an envelope's edge."""
+def single_outcome(
+    runner: TrialRunner, requirement: Requirement, test_id: str, value: float, settings: SearchSettings | None = None
+) -> Outcome:
+    """The outcome of one explicit point (``sal.sweep`` level or ``sal.at``): one run for a
+    deterministic system; a noisy one's runs there until ``p >= reliability`` (or below it) is
+    settled at ``confidence``, or ``max_runs`` are spent."""
+    if runner.policy.noisy:
+        return _noisy_outcome(runner, requirement, settings or SearchSettings(), test_id, value, single=True)
     trial = runner.evaluate(value)
     runner.confirm(trial)
     boundary = Boundary(value if trial.passed else None, None if trial.passed else value, runner.ref.unit)
     return _outcome(runner, requirement, test_id, "passed" if trial.passed else "failed", boundary, "single", [trial], [])
+
+
+def _noisy_outcome(
+    runner: TrialRunner, requirement: Requirement, settings: SearchSettings, test_id: str, edge: float, *, single: bool = False
+) -> Outcome:
+    """A noisy system's outcome at ``edge`` (``reliability_outcome``)."""
+    from pytest_sal.engine.reliability_outcome import reliability_outcome
+
+    if not single:
+        _refuse_unchanged(runner, requirement)
+    space = search_space(runner.ref, requirement.options.get("search_range") if requirement.envelope is not None else None)
+    result, trials, boundary = reliability_outcome(
+        runner, requirement, settings, space, edge, lambda: max(1, runner.executor.slots(runner.system)), single=single
+    )
+    termination = "single" if single else result.termination
+    if single:  # the point passed or failed: the one-sided forms of a sweep level's cell
+        boundary.pass_value, boundary.fail_value = (edge, None) if result.verdict == "passed" else (None, edge)
+    return _outcome(runner, requirement, test_id, result.verdict, boundary, termination, trials, [])
 
 
 def _outcome(
@@ -185,8 +225,17 @@ def _metrics_text(metrics: dict[str, Any], judged: tuple[str, ...] = ()) -> str:
 
 
 def failure_message(outcome: Outcome) -> str:
-    """What a failed (or flaky) robustness test says: the requirement, where it failed, the
-    boundary, the metrics at both ends and a one-line reproduction."""
+    """What a failed (or flaky, or inconclusive) robustness test says: the requirement, where
+    it failed, the boundary, the metrics at both ends (a noisy system's: how sure the verdict
+    is and why runs failed at each severity) and a one-line reproduction."""
+    if outcome.boundary.noisy:
+        from pytest_sal.engine.reliability_outcome import reliability_message
+
+        lines = reliability_message(outcome)
+        if outcome.regression:
+            lines.append(f"  regression: {outcome.regression}")
+        lines.append(f"  reproduce: {outcome.reproduction}")
+        return "\n".join(lines)
     unit = f" {outcome.boundary.unit}" if outcome.boundary.unit else ""
     first = outcome.trials[0]
     judged = tuple(name for name, _, _ in outcome.criteria)

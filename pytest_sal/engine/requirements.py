@@ -141,7 +141,8 @@ class Requirement:
     Attributes:
         criteria: pass criteria (all must hold).
         envelope: the parameter bound searched, or ``None`` (``sal.sweep`` / ``sal.at`` only).
-        options: ``tolerance``, ``max_trials``, ``runs``, ``search_range``, ``seed`` as given.
+        options: ``tolerance``, ``max_trials``, ``runs``, ``search_range``, ``seed``,
+            ``reliability``, ``confidence``, ``max_runs`` as given.
     """
 
     criteria: tuple[Criterion, ...]
@@ -242,14 +243,20 @@ def _searchable_names(owner: Any) -> list[str]:
 
 
 def _check_options(options: Mapping[str, Any], envelope: Bound | None) -> None:
-    known = {"tolerance", "max_trials", "runs", "search_range", "seed"}
+    known = {"tolerance", "max_trials", "runs", "search_range", "seed", "reliability", "confidence", "max_runs"}
     unknown = sorted(set(options) - known)
     if unknown:
         raise InvalidRequirement(f"sal.require(): unknown option(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")
-    for name in ("max_trials", "runs"):
+    for name in ("max_trials", "runs", "max_runs"):
         value = options.get(name)
         if value is not None and (not isinstance(value, int) or isinstance(value, bool) or value < 1):
             raise InvalidRequirement(f"sal.require(): {name} must be a whole number >= 1, got {value!r}")
+    for name, lowest in (("reliability", 0.0), ("confidence", 0.5)):
+        value = options.get(name)
+        if value is not None and (
+            not isinstance(value, numbers.Real) or isinstance(value, bool) or not math.isfinite(value) or not lowest < value < 1
+        ):
+            raise InvalidRequirement(f"sal.require(): {name} must be a probability between {lowest:g} and 1 (both excluded), got {value!r}")
     tolerance = options.get("tolerance")
     if tolerance is not None and (not isinstance(tolerance, numbers.Real) or not math.isfinite(tolerance) or tolerance <= 0):
         raise InvalidRequirement(f"sal.require(): tolerance must be a number > 0 in the parameter's unit, got {tolerance!r}")

@@ -248,12 +248,8 @@ class TrialRunner:
         return positions
 
     def cached(self, value: float) -> bool:
-        """The first run at ``value`` is in the cache (finished, or stopped by this runner's
-        rule): a trial there costs no run. Only looks for the entry's file."""
-        if self.cache is None:
-            return False
-        keys = [self.key(value)] + ([] if self.stop_rule is None else [self.key(value, stop=self.stop_rule)])
-        return any(self.cache.path(key).is_file() for key in keys)
+        """The first run at ``value`` is in the cache: a trial there costs no run (``run_cached``)."""
+        return self.run_cached(value, 0)
 
     def evaluate(self, value: float) -> Trial:
         """The trial at ``value``: runs until the vote's lead settles (``VotePolicy.lead``)."""
@@ -279,28 +275,53 @@ class TrialRunner:
             batch = min(
                 self.policy.needed(trial.passes, trial.fails, confirming, trial.abstained), max(1, self.executor.slots(self.system))
             )
-            numbers = range(len(trial.runs), len(trial.runs) + batch)
-            if batch == 1:
-                results = [self._cached_run(trial.value, numbers[0])]
-            else:
-                with ThreadPoolExecutor(max_workers=batch, thread_name_prefix="sal-run") as pool:
-                    results = list(pool.map(functools.partial(self._cached_run, trial.value), numbers))
-            for data, cached in results:
-                passed = self.requirement.holds(data["metrics"])
-                # a run the machine starved is no evidence that the system failed: it gets no vote
-                run = dict(data["metrics"], passed=passed, abstained=bool(data["metrics"].get("starved")) and not passed, cached=cached)
-                if reason := _not_cached(data):
-                    run["not_cached"] = reason
-                trial.runs.append(run)
-                trial.artifacts.update({k: v for k, v in data.get("artifacts", {}).items() if k not in trial.artifacts})
+            self._append_runs(trial, batch)
             added = True
-        if not added:
-            return
+        if added:
+            self._summarise(trial, time.perf_counter() - start)
+
+    def add_runs(self, trial: Trial, count: int) -> list[dict[str, Any]]:
+        """``count`` more runs of ``trial`` (numbered on from its runs), together; the new run
+        dicts (``passed``, ``abstained``, ``cached`` and the metrics). A noisy system's search
+        (``pytest_sal.engine.reliability_search``) places its runs with this."""
+        start = time.perf_counter()
+        first = len(trial.runs)
+        self._append_runs(trial, count)
+        self._summarise(trial, time.perf_counter() - start)
+        return trial.runs[first:]
+
+    def run_cached(self, value: float, number: int) -> bool:
+        """Run ``number`` at ``value`` is in the cache (finished, or stopped by this runner's
+        rule): it costs no run. Only looks for the entry's file."""
+        if self.cache is None:
+            return False
+        keys = [self.key(value, number)] + ([] if self.stop_rule is None else [self.key(value, number, stop=self.stop_rule)])
+        return any(self.cache.path(key).is_file() for key in keys)
+
+    def _append_runs(self, trial: Trial, count: int) -> None:
+        """Run (or read back) the next ``count`` runs of ``trial`` at once and append them."""
+        numbers = range(len(trial.runs), len(trial.runs) + count)
+        if count == 1:
+            results = [self._cached_run(trial.value, numbers[0])]
+        else:
+            with ThreadPoolExecutor(max_workers=count, thread_name_prefix="sal-run") as pool:
+                results = list(pool.map(functools.partial(self._cached_run, trial.value), numbers))
+        for data, cached in results:
+            passed = self.requirement.holds(data["metrics"])
+            # a run the machine starved is no evidence that the system failed: it gets no vote
+            run = dict(data["metrics"], passed=passed, abstained=bool(data["metrics"].get("starved")) and not passed, cached=cached)
+            if reason := _not_cached(data):
+                run["not_cached"] = reason
+            trial.runs.append(run)
+            trial.artifacts.update({k: v for k, v in data.get("artifacts", {}).items() if k not in trial.artifacts})
+
+    def _summarise(self, trial: Trial, seconds: float) -> None:
+        """The trial's metrics, verdict and time from its runs; reported to ``progress``."""
         trial.metrics = TrialMetrics(aggregate_metrics(trial.runs))
         trial.passed = trial.passes > trial.fails
         trial.cached = all(r["cached"] for r in trial.runs)
         trial.failed = [str(c) for c in self.requirement.failed(trial.metrics)]
-        trial.wall_time_s += time.perf_counter() - start
+        trial.wall_time_s += seconds
         if self.progress is not None:
             with self._progress_lock:
                 self.progress(trial)

@@ -80,7 +80,7 @@ table.trials tr.passed td:nth-child(3) { color: #1a7f37; }
 section.test { border: 1px solid #d0d7de; border-left: 6px solid #1a7f37; border-radius: 6px;
   padding: 1em 1.3em; margin: 1.6em 0; }
 section.test.failed, section.test.regressed { border-left-color: #cf222e; }
-section.test.flaky { border-left-color: #bf8700; }
+section.test.flaky, section.test.inconclusive { border-left-color: #bf8700; }
 .id { font-family: ui-monospace, SFMono-Regular, Menlo, Consolas, monospace; font-weight: 500; overflow-wrap: anywhere; }
 dl { display: grid; grid-template-columns: max-content 1fr; gap: .25em 1em; margin: 0 0 1em; }
 dt { color: #656d76; }
@@ -90,7 +90,7 @@ dd { margin: 0; }
   text-transform: uppercase; letter-spacing: .03em; color: #fff; background: #1a7f37; white-space: nowrap; }
 .badge.failed { background: #cf222e; }
 .badge.regressed { background: #8250df; }
-.badge.flaky { background: #bf8700; }
+.badge.flaky, .badge.inconclusive { background: #bf8700; }
 img.plot { display: block; max-width: 100%; height: auto; border: 1px solid #e5e7eb; border-radius: 4px; }
 .gallery { display: flex; flex-wrap: wrap; gap: .8em; }
 .gallery figure { margin: 0; border: 3px solid #1a7f37; border-radius: 5px; padding: 3px; background: #fff; }

@@ -76,14 +76,17 @@ _LEFT_TRUNCATED = ("test", "parameter")
 _SEP = "  "
 #: Metrics shown in the trials tables, in order (others go to the details only through criteria).
 SHOWN_METRICS = ("ate_rmse", "tracking_rate")
-_VERDICT_TEXT = {"passed": "passed", "failed": "FAILED", "flaky": "FLAKY", "regressed": "FAILED"}
+_VERDICT_TEXT = {"passed": "passed", "failed": "FAILED", "flaky": "FLAKY", "inconclusive": "INCONCLUSIVE", "regressed": "FAILED"}
+#: verdicts that neither passed nor failed: counted apart in the headline (``flaky``: history before 0.2)
+UNSETTLED = ("inconclusive", "flaky")
 
 
 # ---------------------------------------------------------------- pieces of text
 
 
 def status(outcome: Outcome) -> str:
-    """``passed``, ``failed``, ``flaky`` or ``regressed`` (a regression outranks the verdict)."""
+    """``passed``, ``failed``, ``inconclusive`` (``flaky`` in older history) or ``regressed``
+    (a regression outranks the verdict)."""
     return "regressed" if outcome.regression is not None else outcome.verdict
 
 
@@ -131,7 +134,11 @@ def trials_cell(outcome: Outcome) -> str:
 
 def confidence_cell(outcome: Outcome) -> str:
     """The runs agreeing with the verdict at the edge, then at the pass and fail ends, short:
-    ``3/3; 3/3 4/5`` (``1 run/trial`` for a deterministic system)."""
+    ``3/3; 3/3 4/5`` (``1 run/trial`` for a deterministic system); a noisy system's
+    confidence that ``p(edge) >= R``, and its runs: ``97 % sure (30 runs)``."""
+    b = outcome.boundary
+    if b.noisy and b.holds_at_edge is not None:
+        return f"{100 * b.holds_at_edge:.3g} % sure ({b.runs} runs)"
     if all(len(t.runs) <= 1 for t in outcome.trials):
         return "1 run/trial"
 
@@ -146,12 +153,11 @@ def headline(outcomes: Sequence[Outcome]) -> str:
     """``3 robustness requirements: 2 passed, 1 failed`` (regressed and flaky counted apart)."""
     n = len(outcomes)
     passed = sum(o.passed for o in outcomes)
-    flaky = sum(status(o) == "flaky" for o in outcomes)
+    unsettled = {verdict: sum(status(o) == verdict for o in outcomes) for verdict in UNSETTLED}
     regressed = sum(status(o) == "regressed" for o in outcomes)
-    failed = n - passed - flaky
+    failed = n - passed - sum(unsettled.values())
     parts = [f"{passed} passed", f"{failed} failed" + (f" ({regressed} regressed)" if regressed else "")]
-    if flaky:
-        parts.append(f"{flaky} flaky")
+    parts += [f"{count} {verdict}" for verdict, count in unsettled.items() if count]
     noun = "robustness requirement" if n == 1 else "robustness requirements"
     return f"{n} {noun}: {', '.join(parts)}"
 
@@ -163,7 +169,7 @@ def trial_metric_names(criteria: list[tuple[str, str, float]]) -> list[str]:
 
 
 def needs_details(outcome: Outcome) -> bool:
-    return status(outcome) in ("failed", "flaky", "regressed")
+    return status(outcome) in ("failed", "regressed", *UNSETTLED)
 
 
 def _midpoint(b: Boundary) -> float | None:
