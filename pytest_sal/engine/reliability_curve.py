@@ -60,8 +60,8 @@ class SeverityAxis:
     """The severity axis ``x`` of a parameter's search range: 0 at ``mild``, 1 at ``severe``,
     in log(value) when ``log`` (a parameter searched over decades), else in the value.
 
-    ``step`` is the spacing of the fixed grid of severities runs are placed on (``grid``): a
-    power of two, so the grids of different tolerances share their points and every session,
+    ``step`` is the spacing of the fixed grid of severities runs are placed on (``grid``;
+    rounded to whole numbers when ``integer``, by ``grid_value``): a power of two, so the grids of different tolerances share their points and every session,
     xdist worker and cache entry of one parameter and range meet on the same values.
     """
 
@@ -69,6 +69,7 @@ class SeverityAxis:
     severe: float
     log: bool
     step: float
+    integer: bool = False
 
     def to_x(self, value: float | np.ndarray) -> np.ndarray:
         v = np.asarray(value, dtype=float)
@@ -85,18 +86,23 @@ class SeverityAxis:
             value = self.mild + t * (self.severe - self.mild)
         return np.where(t == 0, self.mild, np.where(t == 1, self.severe, value))
 
+    def grid_value(self, x: float) -> float:
+        """The value a run at ``x`` of the grid takes (a whole number for an ``integer`` parameter)."""
+        value = float(self.to_value(x))
+        return float(round(value)) if self.integer else value
+
     @property
     def grid(self) -> np.ndarray:
         """The severities runs are placed on, as ``x`` (0, step, ..., 1)."""
         return np.linspace(0.0, 1.0, int(round(1 / self.step)) + 1)
 
     @classmethod
-    def for_range(cls, mild: float, severe: float, log: bool, tolerance_x: float) -> SeverityAxis:
-        """The axis whose grid step is the largest power of two at most a third of ``tolerance_x``
-        (the tolerance on the axis), between 1/64 and 1/128 of the range (finer grids cost more
+    def for_range(cls, mild: float, severe: float, log: bool, tolerance_x: float, integer: bool = False) -> SeverityAxis:
+        """The axis whose grid step is the largest power of two at most half of ``tolerance_x``
+        (the tolerance on the axis), between 1/64 and 1/256 of the range (finer grids cost more
         to fit than a noisy system's runs can resolve)."""
-        level = min(7, max(6, math.ceil(math.log2(3 / max(tolerance_x, 1e-9)))))
-        return cls(float(mild), float(severe), bool(log), 2.0**-level)
+        level = min(8, max(6, math.ceil(math.log2(2 / max(tolerance_x, 1e-9)))))
+        return cls(float(mild), float(severe), bool(log), 2.0**-level, integer)
 
 
 class _Grid:
@@ -238,6 +244,10 @@ class CurveFit:
                     p_held * _binary_entropy(held[holds].sum() / held.sum()) + (1 - p_held) * _binary_entropy(missed[holds].sum() / missed.sum())
                 )
         return out
+
+    def s_values(self, r: float) -> np.ndarray:
+        """``s_R`` on the axis under every grid point of the curve (``weights`` are their masses)."""
+        return self._s_at(r)
 
     def _s_at(self, r: float) -> np.ndarray:
         if r not in self._s_cache:

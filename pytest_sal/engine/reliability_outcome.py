@@ -60,7 +60,7 @@ def axis_of(space: SearchSpace, edge: float, targets: Targets) -> SeverityAxis:
         tolerance_x = (targets.tolerance if targets.tolerance is not None else (targets.rel_tolerance or 0.1) * max(abs(lo), abs(hi)) / 2) / (
             hi - lo
         )
-    return SeverityAxis.for_range(space.mild, space.severe, log, tolerance_x)
+    return SeverityAxis.for_range(space.mild, space.severe, log, tolerance_x, integer=space.domain == "integer")
 
 
 def run_observations(trials: list[Trial]) -> list[Observation]:

@@ -11,7 +11,8 @@ when it is worth at least half the best value's gain. Placement depends only on 
 a second session with the cache replays the first and sends nothing.
 
 It stops once the verdict is settled at ``confidence`` (``p(edge) >= R``, or ``< R``) and
-``s_R``'s interval is within tolerance (or lies wholly beyond an end of the range), or when
+``s_R``'s interval is within tolerance or two grid cells (or lies wholly beyond an end of the
+range), or when
 ``max_runs`` runs of its own are spent. A verdict still open then is ``inconclusive``.
 """
 
@@ -165,8 +166,9 @@ def _fit(fit: CurveFit, observations: Sequence[Observation]) -> CurveFit:
 
 
 def _within_tolerance(axis: SeverityAxis, s_r: Interval, tolerance: float | None, rel_tolerance: float | None) -> bool:
-    """``s_R``'s interval is within tolerance, or wholly beyond one end of the range."""
-    if s_r.low >= 1 or s_r.high <= 0:
+    """``s_R``'s interval is within tolerance, within two cells of the grid (runs on the grid
+    cannot narrow it further), or wholly beyond one end of the range."""
+    if s_r.low >= 1 or s_r.high <= 0 or s_r.high - s_r.low <= 2 * axis.step * (1 + 1e-9):
         return True
     low, high = (float(axis.to_value(min(max(x, 0.0), 1.0))) for x in (s_r.low, s_r.high))
     spread = abs(high - low)
@@ -184,7 +186,7 @@ def _next_values(
     open_verdict = verdict_of(current, edge_x, reliability, confidence)[0] == "inconclusive"
     weight = _VERDICT_WEIGHT if open_verdict else 0.0
     gains = current.entropy(reliability, edge_x, weight) - current.expected_entropy(candidates, reliability, edge_x, weight)
-    values = [edge if x == edge_x else float(axis.to_value(x)) for x in candidates]
+    values = [edge if x == edge_x else axis.grid_value(x) for x in candidates]
     order = [int(i) for i in np.argsort(-gains, kind="stable")]
     chosen = order[:count]
     free = [i for i in order if gains[i] >= _CACHED_SHARE * gains[order[0]] and cached(values[i])]

@@ -84,6 +84,10 @@ class BoundaryCheck(RegressionCheck):
 
     A boundary that now failed everywhere searched (no pass value) regressed, unless it did
     before too. A previous boundary without a pass value cannot get worse.
+
+    A noisy system's boundary is statistical: its ``s_R`` regressed when the probability that
+    it moved toward the mild side by more than the limit, from the baseline's runs to this
+    run's, reaches the current outcome's confidence (``engine.reliability_compare``).
     """
 
     limit: float
@@ -95,6 +99,8 @@ class BoundaryCheck(RegressionCheck):
     def fails(self, current: Outcome, previous: Outcome) -> str | None:
         if not _comparable(current, previous):
             return None
+        if current.boundary.noisy and previous.boundary.noisy:
+            return self._statistical(current, previous)
         before, now = previous.boundary.pass_value, current.boundary.pass_value
         unit = current.boundary.unit or previous.boundary.unit
         where = "down to" if current.worse == "lower" else "up to"
@@ -113,6 +119,29 @@ class BoundaryCheck(RegressionCheck):
         return (
             f"{label} moved {toward}: passed {where} {with_unit(before, unit)} before, now only {where} "
             f"{with_unit(now, unit)} ({moved}, limit {self._limit_text(unit)})"
+        )
+
+
+    def _statistical(self, current: Outcome, previous: Outcome) -> str | None:
+        """A noisy system's ``s_R`` moved beyond the limit with the current outcome's confidence
+        (``reliability_compare``): both curves fitted again from their runs."""
+        from pytest_sal.engine.reliability_compare import refit, regression_probability
+
+        now_b, before_b = current.boundary, previous.boundary
+        if now_b.reliability != before_b.reliability or now_b.search_range != before_b.search_range:
+            return None  # another requirement: not comparable
+        fits = refit(previous), refit(current)
+        if fits[0] is None or fits[1] is None:
+            return None
+        assert now_b.reliability is not None and now_b.confidence is not None
+        probability = regression_probability(fits[0], fits[1], now_b.reliability, self.limit, self.relative, current.worse)
+        if probability < now_b.confidence:
+            return None
+        name, unit = f"s{100 * now_b.reliability:.4g}", now_b.unit or before_b.unit
+        return (
+            f"{current.parameter} {name} moved toward the mild side by more than {self._limit_text(unit)} with probability "
+            f"{100 * probability:.3g} % (>= {100 * now_b.confidence:.4g} %): {name} {with_unit(before_b.estimate, unit)} before "
+            f"({before_b.runs} runs), now {with_unit(now_b.estimate, unit)} ({now_b.runs} runs)"
         )
 
 
