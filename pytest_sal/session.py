@@ -41,6 +41,8 @@ class SalSession:
         self._history: History | None = None
         self._executor: Executor | None = None
         self._datasets: dict[str, Any] = {}
+        #: a noisy system's trials so far, per system, dataset, parameter and seed (``_family``)
+        self._noisy_trials: dict[str, dict[float, Any]] = {}
 
     @property
     def runs(self) -> int | None:
@@ -155,15 +157,29 @@ class SalSession:
         previous = self._start_from((item.nodeid, system.name, dataset.name))
         envelope = requirement.envelope
         start = warm_start(previous, parameter=envelope.ref.label, edge=envelope.value, worse=envelope.ref.param.worse)
-        outcome = search_outcome(runner, requirement, self.options.search, item.nodeid, start)
-        return self._finished(outcome, system)
+        family = self._family(runner)
+        outcome = search_outcome(runner, requirement, self.options.search, item.nodeid, start, earlier=self._earlier(family))
+        return self._finished(outcome, system, family)
 
     def single(self, item: pytest.Item, ref: Any, value: float, dataset: Any, system: Any, runs: int | None, workdir: Path) -> Any:
         from pytest_sal.engine.requirement_runner import single_outcome
 
         runner = self._runner(item, ref, dataset, system, runs, workdir)
-        outcome = single_outcome(runner, item.function.sal_requirement, item.nodeid, value, self.options.search)  # type: ignore[attr-defined]
-        return self._finished(outcome, system)
+        family = self._family(runner)
+        requirement = item.function.sal_requirement  # type: ignore[attr-defined]
+        outcome = single_outcome(runner, requirement, item.nodeid, value, self.options.search, self._earlier(family))
+        return self._finished(outcome, system, family)
+
+    def _family(self, runner: Any) -> str:
+        """Runs of one family are interchangeable between requirements (their records are metrics,
+        judged by each requirement): the system, dataset, parameter and seed, as a cache key."""
+        from pytest_sal.store.cache_keys import cache_key
+
+        return cache_key(system=runner.system.identity(), dataset=runner.dataset.fingerprint, parameter=runner.ref.label, seed=runner.seed)
+
+    def _earlier(self, family: str) -> list[Any]:
+        """The noisy system's trials of ``family`` run earlier in this session (every run counts)."""
+        return list(self._noisy_trials.get(family, {}).values())
 
     def _start_from(self, key: tuple[str, str, str]) -> Any:
         """The outcome whose boundary the search tries first: the baseline's under
@@ -186,8 +202,14 @@ class SalSession:
             self._machine = machine_text(machine_info())
         return self._machine
 
-    def _finished(self, outcome: Any, system: Any) -> Any:
-        """``outcome`` with where it ran and, under ``--sal-compare``, compared with its baseline."""
+    def _finished(self, outcome: Any, system: Any, family: str) -> Any:
+        """``outcome`` with where it ran and, under ``--sal-compare``, compared with its baseline;
+        a noisy system's trials kept for the next requirement of the same ``family``."""
+        if outcome.boundary.noisy:
+            kept = self._noisy_trials.setdefault(family, {})
+            for trial in outcome.trials:
+                if len(trial.runs) >= len(kept[trial.value].runs if trial.value in kept else ()):
+                    kept[trial.value] = trial
         outcome.machine = self.machine
         outcome.system_version = system.version_text()
         if self.options.compare is None:

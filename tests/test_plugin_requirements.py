@@ -209,7 +209,7 @@ def test_a_noisy_edge_that_holds_half_the_time_fails_and_a_short_budget_is_incon
     low, high = sorted(boundary["interval"])
     # s80 is 18.4 m (every run holds from there on), resolved to the location grid: half a grid step of
     # 1/128 of 5 decades, 4.6 %
-    assert low <= 18.4 * 1.046 and 18.4 <= high and boundary["bound"] >= 18.4
+    assert low <= 18.4 * 1.046 and high >= 18.4 and boundary["bound"] >= 18.4
     edge = noisy_outcome["trials"][0]
     assert edge["value"] == 18 and {r["tracking_rate"] for r in edge["runs"]} == {0.45, 1.0}
     has_line(result, "test_noisy ", "bern", ">= 18 m", "FAILED")
@@ -221,6 +221,39 @@ def test_a_noisy_edge_that_holds_half_the_time_fails_and_a_short_budget_is_incon
     again.assert_outcomes(passed=1, failed=2)
     assert calls(pytester) == before
     assert outcomes(pytester.path / "again.xml")["test_noisy"]["boundary"] == boundary
+
+
+SESSION_RUNS_TESTS = """
+
+@sal.sweep(fog.visibility_m, A=18)
+@sal.require(tracking_rate >= 0.46, max_runs=8)
+def test_a_level(sal_trial):
+    pass
+
+
+@sal.require(tracking_rate >= 0.46, fog.visibility_m >= 18, max_runs=3)
+def test_b_search(sal_outcome):
+    pass
+"""
+
+
+def test_a_noisy_search_counts_the_runs_of_a_sweep_level_earlier_in_the_session(pytester: pytest.Pytester) -> None:
+    # the sweep level at 18 m runs first (up to 8 runs); the search of the same system, dataset and
+    # parameter starts from those runs, numbers its own on from them and adds at most 3
+    project(pytester, SESSION_RUNS_TESTS, {"*": {"held": "1 if v >= 18.4 else 0.5", "late": 0.45}})
+    result = run(pytester, [], "--sal-no-history", "--junitxml=out.xml")
+    result.assert_outcomes(failed=2)
+    found = outcomes(pytester.path / "out.xml")
+    level, search = found["test_a_level[A-fog.visibility_m=18]"], found["test_b_search"]
+    level_runs = len(level["trials"][0]["runs"])
+    edge = search["trials"][0]
+
+    def seen(runs: list[dict]) -> list[tuple]:
+        return [(r["tracking_rate"], r["first_tracked"], r["passed"]) for r in runs]
+
+    assert edge["value"] == 18 and seen(edge["runs"][:level_runs]) == seen(level["trials"][0]["runs"])
+    assert search["boundary"]["runs"] == level_runs + 3 == sum(len(t["runs"]) for t in search["trials"])
+    assert calls(pytester) == level_runs + 3
 
 
 # -- 5: the trial cache ----------------------------------------------------------------------

@@ -42,7 +42,9 @@ def regression_probability(before: CurveFit, now: CurveFit, reliability: float, 
     worse_by = (values_now[:, None] - values_before[None, :]) if worse == "lower" else (values_before[None, :] - values_now[:, None])
     if relative:
         with np.errstate(divide="ignore", invalid="ignore"):
-            change = np.where(values_before[None, :] == 0, np.where(worse_by > 0, np.inf, 0.0), 100 * worse_by / np.abs(values_before)[None, :])
+            change = np.where(
+                values_before[None, :] == 0, np.where(worse_by > 0, np.inf, 0.0), 100 * worse_by / np.abs(values_before)[None, :]
+            )
     else:
         change = worse_by
     return float((mass_now[:, None] * mass_before[None, :] * (change > limit)).sum())

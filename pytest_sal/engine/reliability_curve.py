@@ -114,9 +114,10 @@ class _Grid:
         loc, wid, lapse, floor = (a.ravel() for a in np.meshgrid(locations, widths, _LAPSES, _FLOORS, indexing="ij"))
         keep = (1 - lapse) - floor >= 0.1  # the curve falls by at least 0.1: ceiling above floor
         self.location, self.width, self.ceiling, self.floor = loc[keep], wid[keep], 1 - lapse[keep], floor[keep]
-        self.log_prior = _log_cell_prior(_LAPSES, _LAPSE_PRIOR)[np.searchsorted(_LAPSES, lapse[keep])] + _log_cell_prior(
-            _FLOORS, _FLOOR_PRIOR
-        )[np.searchsorted(_FLOORS, floor[keep])]
+        self.log_prior = (
+            _log_cell_prior(_LAPSES, _LAPSE_PRIOR)[np.searchsorted(_LAPSES, lapse[keep])]
+            + _log_cell_prior(_FLOORS, _FLOOR_PRIOR)[np.searchsorted(_FLOORS, floor[keep])]
+        )
 
     def p(self, x: float) -> np.ndarray:
         """``p(x)`` under every grid point."""
@@ -210,7 +211,7 @@ class CurveFit:
         """``p(x)``: median and equal-tailed interval (``bound``: its lower one-sided bound)."""
         return self._summary(self.grid.p(x), confidence)
 
-    def band(self, xs: Sequence[float], confidence: float) -> np.ndarray:
+    def band(self, xs: Sequence[float] | np.ndarray, confidence: float) -> np.ndarray:
         """Rows ``(x, median, low, high)`` of ``p`` at ``xs``."""
         rows = [(x, *(lambda i: (i.estimate, i.low, i.high))(self.p_at(float(x), confidence))) for x in xs]
         return np.array(rows, dtype=float)
@@ -225,23 +226,33 @@ class CurveFit:
     def expected_entropy(self, candidates: np.ndarray, r: float, edge_x: float | None = None, verdict_weight: float = 0.0) -> np.ndarray:
         """For each candidate ``x``: ``entropy`` expected after one more run there (lower: the
         run says more about ``s_R``), plus ``verdict_weight`` times the expected binary entropy
-        of "``s_R`` is at least as severe as ``edge_x``" (the verdict) when that is given."""
-        live = self.weights > self.weights.max() * 1e-7  # the rest cannot move an entropy
+        of "``s_R`` is at least as severe as ``edge_x``" (the verdict) when that is given.
+        Vectorised over candidates (8 at a time), the grid points sorted by their ``s_R`` cell."""
+        live = np.flatnonzero(self.weights > self.weights.max() * 1e-7)  # the rest cannot move an entropy
         s = self._s_at(r)[live]
-        bins, weights = np.searchsorted(self.axis.grid, s), self.weights[live]
+        order = np.argsort(np.searchsorted(self.axis.grid, s), kind="stable")
+        live, s = live[order], s[order]
+        cells = np.searchsorted(self.axis.grid, s)
+        starts = np.flatnonzero(np.concatenate([[True], cells[1:] != cells[:-1]]))
+        weights = self.weights[live].astype(np.float32)  # single precision: twice as fast, ample for an entropy
         holds = s >= (edge_x if edge_x is not None else -np.inf)
-        location, width, floor, ceiling = (a[live] for a in (self.grid.location, self.grid.width, self.grid.floor, self.grid.ceiling))
-        size = len(self.axis.grid) + 1
-        total = weights.sum()
+        location, width, floor, ceiling = (
+            a[live].astype(np.float32) for a in (self.grid.location, self.grid.width, self.grid.floor, self.grid.ceiling)
+        )
         out = np.empty(len(candidates))
-        for i, x in enumerate(candidates):
-            held = weights * (floor + (ceiling - floor) * special.expit(-(float(x) - location) / width))
-            p_held = held.sum() / total
+        for first in range(0, len(candidates), 8):
+            xs = np.asarray(candidates[first : first + 8], dtype=np.float32)[:, None]
+            held = weights * (floor + (ceiling - floor) * special.expit(-(xs - location) / width))
             missed = weights - held
-            out[i] = p_held * _entropy(np.bincount(bins, held, size)) + (1 - p_held) * _entropy(np.bincount(bins, missed, size))
+            held_total, missed_total = held.sum(axis=1), missed.sum(axis=1)
+            p_held = held_total / (held_total + missed_total)
+            out[first : first + len(xs)] = p_held * _entropies(np.add.reduceat(held, starts, axis=1)) + (1 - p_held) * _entropies(
+                np.add.reduceat(missed, starts, axis=1)
+            )
             if verdict_weight:
-                out[i] += verdict_weight * (
-                    p_held * _binary_entropy(held[holds].sum() / held.sum()) + (1 - p_held) * _binary_entropy(missed[holds].sum() / missed.sum())
+                out[first : first + len(xs)] += verdict_weight * (
+                    p_held * _binary_entropies(held[:, holds].sum(axis=1) / held_total)
+                    + (1 - p_held) * _binary_entropies(missed[:, holds].sum(axis=1) / missed_total)
                 )
         return out
 
@@ -255,8 +266,12 @@ class CurveFit:
         return self._s_cache[r]
 
     def _summary(self, values: np.ndarray, confidence: float) -> Interval:
+        """Weighted quantiles of ``values`` (one per grid point) under the posterior; grid points
+        with a mass below 1e-12 of the largest are left out (they move no quantile)."""
+        live = self.weights > self.weights.max() * 1e-12
+        values, weights = values[live], self.weights[live]
         order = np.argsort(values, kind="stable")
-        cumulative = np.cumsum(self.weights[order])
+        cumulative = np.cumsum(weights[order])
         sorted_values = values[order]
 
         def quantile(q: float) -> float:
@@ -274,6 +289,17 @@ def _entropy(masses: np.ndarray) -> float:
 
 def _binary_entropy(p: float) -> float:
     return float(special.entr(p) + special.entr(1 - p))
+
+
+def _entropies(masses: np.ndarray) -> np.ndarray:
+    """``_entropy`` of each row of ``masses``."""
+    totals = masses.sum(axis=1, keepdims=True)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(totals[:, 0] > 0, special.entr(masses / totals).sum(axis=1), 0.0)
+
+
+def _binary_entropies(p: np.ndarray) -> np.ndarray:
+    return special.entr(p) + special.entr(1 - p)
 
 
 def fit_curve(axis: SeverityAxis, values: Sequence[float], held: Sequence[bool]) -> CurveFit:

@@ -54,12 +54,16 @@ def axis_of(space: SearchSpace, edge: float, targets: Targets) -> SeverityAxis:
     log = lo > 0 and (space.scale == "log" or hi / lo >= 10)
     if log:
         span = math.log(hi / lo)
-        step = math.log1p(targets.tolerance / max(abs(edge), lo)) if targets.tolerance is not None else math.log1p(targets.rel_tolerance or 0.1)
+        step = (
+            math.log1p(targets.tolerance / max(abs(edge), lo))
+            if targets.tolerance is not None
+            else math.log1p(targets.rel_tolerance or 0.1)
+        )
         tolerance_x = step / span
     else:
-        tolerance_x = (targets.tolerance if targets.tolerance is not None else (targets.rel_tolerance or 0.1) * max(abs(lo), abs(hi)) / 2) / (
-            hi - lo
-        )
+        tolerance_x = (
+            targets.tolerance if targets.tolerance is not None else (targets.rel_tolerance or 0.1) * max(abs(lo), abs(hi)) / 2
+        ) / (hi - lo)
     return SeverityAxis.for_range(space.mild, space.severe, log, tolerance_x, integer=space.domain == "integer")
 
 
@@ -77,13 +81,20 @@ def reliability_outcome(
     width: Callable[[], int],
     *,
     single: bool = False,
+    earlier: list[Trial] | None = None,
 ) -> tuple[ReliabilityResult, list[Trial], Boundary]:
     """Search ``requirement`` (a noisy system) from ``edge``: the result, the trials (one per
     severity, the edge's first) and the statistical ``Boundary``. ``single``: every run at
-    ``edge`` (a ``sal.sweep`` level or ``sal.at`` point), until the verdict settles."""
+    ``edge`` (a ``sal.sweep`` level or ``sal.at`` point), until the verdict settles.
+    ``earlier``: trials of the same system, dataset, parameter and seed run earlier in the
+    session (other requirements', sweep levels'): their runs are judged by this requirement and
+    counted in the fit, free; new runs at their values are numbered on from them."""
     targets = Targets(requirement, settings)
     axis = axis_of(space, edge, targets)
     trials: dict[float, Trial] = {}
+    for before in earlier or ():
+        trials[before.value] = _judged(before, requirement)
+    known = run_observations(list(trials.values()))
 
     def run_at(value: float, count: int) -> list[bool | None]:
         trial = trials.setdefault(value, Trial(value=value, passed=False))
@@ -115,8 +126,23 @@ def reliability_outcome(
         width=width,
         cached=cached,
         at_edge_only=single,
+        earlier=known,
     )
-    return result, list(trials.values()), _boundary(result, axis, targets, runner.ref.unit, space)
+    ordered = sorted(trials.values(), key=lambda t: t.value != edge)  # the edge's trial first, then in the order they were made
+    return result, ordered, _boundary(result, axis, targets, runner.ref.unit, space)
+
+
+def _judged(trial: Trial, requirement: Requirement) -> Trial:
+    """A copy of ``trial`` whose runs are judged by ``requirement`` (a run that failed after the
+    machine starved it abstains), with its verdict (the majority) and failed criteria."""
+    runs = []
+    for run in trial.runs:
+        passed = requirement.holds(run)
+        runs.append(dict(run, passed=passed, abstained=bool(run.get("starved")) and not passed, cached=True))
+    copy = Trial(value=trial.value, passed=False, metrics=trial.metrics, runs=runs, cached=True, artifacts=dict(trial.artifacts))
+    copy.passed = copy.passes > copy.fails
+    copy.failed = [str(c) for c in requirement.failed(copy.metrics)]
+    return copy
 
 
 def _boundary(result: ReliabilityResult, axis: SeverityAxis, targets: Targets, unit: str, space: SearchSpace) -> Boundary:

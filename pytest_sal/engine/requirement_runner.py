@@ -114,11 +114,13 @@ def search_outcome(
     settings: SearchSettings,
     test_id: str,
     warm_start: tuple[float | None, float | None] | None = None,
+    earlier: list[Trial] | None = None,
 ) -> Outcome:
     """Run the boundary search of ``requirement`` with ``runner`` and describe what it found
-    (a noisy system's: the curve of its chance to hold, ``reliability_outcome``)."""
+    (a noisy system's: the curve of its chance to hold, ``reliability_outcome``, which also
+    counts the runs of ``earlier`` trials of the session)."""
     if runner.policy.noisy:
-        return _noisy_outcome(runner, requirement, settings, test_id, requirement.envelope.value)  # type: ignore[union-attr]
+        return _noisy_outcome(runner, requirement, settings, test_id, requirement.envelope.value, earlier=earlier)  # type: ignore[union-attr]
     result = run_search(runner, requirement, settings, warm_start)
     verdict = "flaky" if result.flaky else "passed" if result.edge_passed else "failed"
     boundary = Boundary(result.pass_value, result.fail_value, runner.ref.unit)
@@ -127,13 +129,18 @@ def search_outcome(
 
 
 def single_outcome(
-    runner: TrialRunner, requirement: Requirement, test_id: str, value: float, settings: SearchSettings | None = None
+    runner: TrialRunner,
+    requirement: Requirement,
+    test_id: str,
+    value: float,
+    settings: SearchSettings | None = None,
+    earlier: list[Trial] | None = None,
 ) -> Outcome:
     """The outcome of one explicit point (``sal.sweep`` level or ``sal.at``): one run for a
     deterministic system; a noisy one's runs there until ``p >= reliability`` (or below it) is
     settled at ``confidence``, or ``max_runs`` are spent."""
     if runner.policy.noisy:
-        return _noisy_outcome(runner, requirement, settings or SearchSettings(), test_id, value, single=True)
+        return _noisy_outcome(runner, requirement, settings or SearchSettings(), test_id, value, single=True, earlier=earlier)
     trial = runner.evaluate(value)
     runner.confirm(trial)
     boundary = Boundary(value if trial.passed else None, None if trial.passed else value, runner.ref.unit)
@@ -141,16 +148,31 @@ def single_outcome(
 
 
 def _noisy_outcome(
-    runner: TrialRunner, requirement: Requirement, settings: SearchSettings, test_id: str, edge: float, *, single: bool = False
+    runner: TrialRunner,
+    requirement: Requirement,
+    settings: SearchSettings,
+    test_id: str,
+    edge: float,
+    *,
+    single: bool = False,
+    earlier: list[Trial] | None = None,
 ) -> Outcome:
-    """A noisy system's outcome at ``edge`` (``reliability_outcome``)."""
+    """A noisy system's outcome at ``edge`` (``reliability_outcome``); a single point counts
+    only the ``earlier`` runs at its own value."""
     from pytest_sal.engine.reliability_outcome import reliability_outcome
 
     if not single:
         _refuse_unchanged(runner, requirement)
     space = search_space(runner.ref, requirement.options.get("search_range") if requirement.envelope is not None else None)
     result, trials, boundary = reliability_outcome(
-        runner, requirement, settings, space, edge, lambda: max(1, runner.executor.slots(runner.system)), single=single
+        runner,
+        requirement,
+        settings,
+        space,
+        edge,
+        lambda: max(1, runner.executor.slots(runner.system)),
+        single=single,
+        earlier=[t for t in earlier or () if not single or t.value == edge],
     )
     termination = "single" if single else result.termination
     if single:  # the point passed or failed: the one-sided forms of a sweep level's cell

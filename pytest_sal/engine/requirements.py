@@ -254,7 +254,7 @@ def _check_options(options: Mapping[str, Any], envelope: Bound | None) -> None:
     for name, lowest in (("reliability", 0.0), ("confidence", 0.5)):
         value = options.get(name)
         if value is not None and (
-            not isinstance(value, numbers.Real) or isinstance(value, bool) or not math.isfinite(value) or not lowest < value < 1
+            not isinstance(value, numbers.Real) or isinstance(value, bool) or not math.isfinite(value) or not lowest < float(value) < 1
         ):
             raise InvalidRequirement(f"sal.require(): {name} must be a probability between {lowest:g} and 1 (both excluded), got {value!r}")
     tolerance = options.get("tolerance")

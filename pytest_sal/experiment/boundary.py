@@ -160,7 +160,13 @@ def prepare_boundary_search(
     if rb.fail_on_tracking_failure:
         criteria.append(tracking_rate >= TRACKING_FAIL_RATE)
     requirement = Requirement.build(
-        [*criteria, envelope], tolerance=rb.tolerance, max_trials=rb.max_iters, search_range=(rb.lower_bound, rb.upper_bound)
+        [*criteria, envelope],
+        tolerance=rb.tolerance,
+        max_trials=rb.max_iters,
+        search_range=(rb.lower_bound, rb.upper_bound),
+        reliability=rb.reliability,
+        confidence=rb.confidence,
+        max_runs=rb.max_runs,
     )
     clean = build_sequence(config)
     folder = config.output_dir() / "robustness_boundary" / system.name / rb.name
@@ -225,6 +231,9 @@ def _summary(search: BoundarySearch, outcome: Outcome, plot_path: Path | None) -
         "upper_bound": rb.upper_bound,
         "tolerance": rb.tolerance,
         "max_iters": rb.max_iters,
+        "reliability": rb.reliability,
+        "confidence": rb.confidence,
+        "max_runs": rb.max_runs,
         "linear_sweep_trials": search.sweep_trials,
         "plot": None if plot_path is None else str(plot_path),
     }

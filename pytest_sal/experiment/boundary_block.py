@@ -1,7 +1,8 @@
 """The ``robustness_boundary`` block of an experiment config, checked: its target is a
 perturbation of the config (not the clean sequence), its parameter a searchable parameter of
 that perturbation (a composite's by its address, ``fog.visibility_m``), its bounds inside the
-parameter's search range and in order, and ``tolerance`` and ``ate_rmse_fail`` positive."""
+parameter's search range and in order, ``tolerance`` and ``ate_rmse_fail`` positive, and a noisy
+system's ``reliability`` and ``confidence`` probabilities and ``max_runs`` a run budget."""
 
 from __future__ import annotations
 
@@ -46,6 +47,12 @@ def read_boundary(checks: ValueChecks, value: Any, perturbations: tuple[Perturba
     fail = checks.typed(d.get("ate_rmse_fail", 1.5), f"{BLOCK}.ate_rmse_fail", "number")
     if not 0 < fail < float("inf"):
         raise checks.error(f"{BLOCK}.ate_rmse_fail", f"{fail:g} m is not valid; must be a number > 0 m")
+    probabilities = {}
+    for key, lowest in (("reliability", 0.0), ("confidence", 0.5)):
+        chance = checks.typed(d.get(key, getattr(BoundaryConfig, key)), f"{BLOCK}.{key}", "number")
+        if not lowest < chance < 1:
+            raise checks.error(f"{BLOCK}.{key}", f"{chance:g} is not valid; must be a probability between {lowest:g} and 1 (both excluded)")
+        probabilities[key] = float(chance)
     name = d.get("name") or f"{target.name}_{parameter.replace('.', '_')}"
     return BoundaryConfig(
         target_perturbation=target.name,
@@ -59,6 +66,8 @@ def read_boundary(checks: ValueChecks, value: Any, perturbations: tuple[Perturba
         max_iters=checks.search_trials(d.get("max_iters", 8), f"{BLOCK}.max_iters"),
         ate_rmse_fail=fail,
         fail_on_tracking_failure=checks.typed(d.get("fail_on_tracking_failure", True), f"{BLOCK}.fail_on_tracking_failure", "bool"),
+        max_runs=checks.search_runs(d.get("max_runs", BoundaryConfig.max_runs), f"{BLOCK}.max_runs"),
+        **probabilities,
     )
 
 

@@ -31,6 +31,7 @@ __all__ = [
     "MAX_PATH_BYTES",
     "MAX_PERTURBATIONS",
     "MAX_RENDERED_FRAMES",
+    "MAX_SEARCH_RUNS",
     "MAX_SEARCH_TRIALS",
     "OUTPUT_KEYS",
     "PERTURBATION_KEYS",
@@ -97,7 +98,8 @@ class OutputConfig:
 @dataclass(frozen=True)
 class BoundaryConfig:
     """The ``robustness_boundary`` block: bounds and ``tolerance`` in the parameter's unit,
-    ``ate_rmse_fail`` in m; ``module`` is the module owning ``parameter`` in the target."""
+    ``ate_rmse_fail`` in m; ``module`` is the module owning ``parameter`` in the target; a noisy
+    system's ``reliability``, ``confidence`` and run budget ``max_runs`` (as ``sal.require``'s)."""
 
     target_perturbation: str
     parameter: str
@@ -110,6 +112,9 @@ class BoundaryConfig:
     max_iters: int = 8
     ate_rmse_fail: float = 1.5
     fail_on_tracking_failure: bool = True
+    reliability: float = 0.8
+    confidence: float = 0.9
+    max_runs: int = 30
 
 
 @dataclass(frozen=True)
@@ -171,6 +176,9 @@ BOUNDARY_KEYS = (
     "max_iters",
     "ate_rmse_fail",
     "fail_on_tracking_failure",
+    "reliability",
+    "confidence",
+    "max_runs",
 )
 
 #: Limits of the schema, checked before anything is built: the perturbation modules (each
@@ -184,6 +192,8 @@ MAX_PATH_BYTES = 4096
 MAX_NAME_BYTES = 255
 #: Trials of a boundary search (bisection: 64 halvings reach a double's precision).
 MAX_SEARCH_TRIALS = 100
+#: The most runs a noisy system's boundary search may make (``robustness_boundary.max_runs``).
+MAX_SEARCH_RUNS = 10_000
 #: Segment lengths of the KITTI metrics (the devkit has 8).
 MAX_KITTI_SEGMENTS = 100
 

@@ -15,7 +15,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeGuard, TypeVar
 
-from pytest_sal.experiment.schema import MAX_FRAMES, MAX_NAME_BYTES, MAX_PATH_BYTES, MAX_SEARCH_TRIALS
+from pytest_sal.experiment.schema import MAX_FRAMES, MAX_NAME_BYTES, MAX_PATH_BYTES, MAX_SEARCH_RUNS, MAX_SEARCH_TRIALS
 from pytest_sal.experiment.yaml_loader import NAME_CHARS, QUOTE_CHARS, ConfigError, key_text, one_line, quote, type_name
 from sal_adapters.datasets import DatasetKind
 from sal_adapters.plugins import EntryPointRegistry, PluginError
@@ -144,6 +144,13 @@ class ValueChecks:
         if trials > MAX_SEARCH_TRIALS:
             raise self.error(where, f"{trials} is not valid; the limit is {MAX_SEARCH_TRIALS} trials")
         return trials
+
+    def search_runs(self, value: Any, where: str) -> int:
+        """A noisy system's run budget, 1 .. ``MAX_SEARCH_RUNS``."""
+        runs = self.typed(value, where, "int", minimum=1)
+        if runs > MAX_SEARCH_RUNS:
+            raise self.error(where, f"{runs} is not valid; the limit is {MAX_SEARCH_RUNS} runs")
+        return runs
 
     def frame_count(self, value: Any, where: str) -> int | None:
         """An optional frame count, 1 .. ``MAX_FRAMES``."""

@@ -121,7 +121,6 @@ class BoundaryCheck(RegressionCheck):
             f"{with_unit(now, unit)} ({moved}, limit {self._limit_text(unit)})"
         )
 
-
     def _statistical(self, current: Outcome, previous: Outcome) -> str | None:
         """A noisy system's ``s_R`` moved beyond the limit with the current outcome's confidence
         (``reliability_compare``): both curves fitted again from their runs."""

@@ -1,7 +1,8 @@
 """The metric-against-parameter plot of one outcome: per metric a panel of the trials' values
 against the searched parameter, with the criterion's threshold, the boundary interval as a band,
-the previous boundary hatched and the envelope's edge with its required side shaded. The HTML
-report, the pytest-html rows and ``sal boundary`` show it."""
+the previous boundary hatched and the envelope's edge with its required side shaded; for a noisy
+system's outcome (a statistical boundary) the reliability plot (``reliability_plot``) instead.
+The HTML report, the pytest-html rows and ``sal boundary`` show it."""
 
 from __future__ import annotations
 
@@ -19,6 +20,7 @@ from pytest_sal.engine.outcome import Outcome, Trial
 from pytest_sal.engine.requirements import METRICS
 from pytest_sal.report.formatting import short_id, truncate_left
 from pytest_sal.report.outcome_report import boundary_cell, envelope_text, status
+from pytest_sal.report.reliability_plot import reliability_figure
 
 __all__ = ["metric_figure", "metric_plot"]
 
@@ -38,7 +40,10 @@ def metric_figure(outcome: Outcome) -> Figure:
     top where the metric is missing), the criterion threshold, the boundary interval as a band,
     the previous boundary hatched, the envelope's edge as a dashed line with its required side
     shaded. Log x when the trials
-    span two decades or more."""
+    span two decades or more. A noisy system's outcome (``boundary.noisy``) gets
+    ``reliability_figure`` instead: the chance that a run holds the requirement, fitted."""
+    if outcome.boundary.noisy:
+        return reliability_figure(outcome)
     names = _plotted_metrics(outcome)
     fig = Figure(figsize=FIGSIZE, dpi=DPI, layout="constrained")
     FigureCanvasAgg(fig)

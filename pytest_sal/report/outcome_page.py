@@ -9,11 +9,12 @@ Importing this module is light (the plugin imports it when the session ends, wit
 from __future__ import annotations
 
 import hashlib
+import math
 import re
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
-from pytest_sal.engine.outcome import Outcome, failures_first
+from pytest_sal.engine.outcome import Boundary, Outcome, failures_first
 from pytest_sal.engine.quantity import with_unit
 from pytest_sal.report.formatting import metrics_text, short_id, signed
 from pytest_sal.report.html_page import REPORT_CSS, asset_src, esc, html_page, page_folder
@@ -85,6 +86,8 @@ def _section(o: Outcome, slug: str, directory: Path) -> str:
         ("margin", esc(signed(o.margin, unit))),
         ("confidence", f"{esc(o.confidence())} <span class='dim'>({len(o.trials)} trials, {o.runs} runs)</span>"),
     ]
+    if o.boundary.noisy:
+        facts.append(("reliability curve", esc(_reliability_text(o.boundary))))
     if o.previous is not None:
         facts.append(("previous", f"{esc(o.previous.text())} <span class='dim'>(change {esc(change_cell(o))})</span>"))
     if o.regression:
@@ -104,9 +107,8 @@ def _section(o: Outcome, slug: str, directory: Path) -> str:
         from pytest_sal.report.metric_plot import metric_plot  # matplotlib: only when there is a plot to draw
 
         plot = metric_plot(o, assets / "metrics.png")
-        parts.append(
-            f"<img class='plot' src='{asset_src(plot, directory)}' alt='{esc(o.parameter)} against the metrics' width='800' height='600'>"
-        )
+        shows = f"the chance that a run holds against {o.parameter}" if o.boundary.noisy else f"{o.parameter} against the metrics"
+        parts.append(f"<img class='plot' src='{asset_src(plot, directory)}' alt='{esc(shows)}' width='800' height='600'>")
         parts.append(_trials_table(o))
     if o.contradictions:
         items = "".join(f"<li>{esc(c)}</li>" for c in o.contradictions)
@@ -117,6 +119,31 @@ def _section(o: Outcome, slug: str, directory: Path) -> str:
             parts.append(f"<h3>{heading}</h3><div class='gallery {kind}'>{''.join(figures)}</div>")
     parts.append("</section>")
     return "\n".join(parts)
+
+
+def _reliability_text(b: Boundary) -> str:
+    """A noisy system's fitted numbers: ``s80 19.68 m (90 % interval 14.72 m to 23.24 m), bound
+    s80/90 21.94 m; s50 18.1 m (90 % interval beyond 1 m to 21.2 m); p falls from 20.55 m to
+    18.01 m (10 % to 90 % of its drop)`` (a value at an end of the search range as ``beyond`` or
+    ``before`` it)."""
+    r, c = f"{100 * (b.reliability or 0):.4g}", f"{100 * (b.confidence or 0):.4g}"
+
+    def value(v: float | None) -> str:
+        if v is not None and b.search_range:
+            for word, end in zip(("before", "beyond"), b.search_range):
+                if math.isclose(v, end, rel_tol=1e-9, abs_tol=1e-12):
+                    return f"{word} {with_unit(end, b.unit)}"
+        return with_unit(v, b.unit)
+
+    def interval(ends: list[float] | None) -> str:
+        return f" ({c} % interval {value(min(ends))} to {value(max(ends))})" if ends else ""
+
+    parts = [f"s{r} {value(b.estimate)}{interval(b.interval)}, bound s{r}/{c} {value(b.bound)}"]
+    if r != "50":
+        parts.append(f"s50 {value(b.s50)}{interval(b.s50_interval)}")
+    if b.transition:
+        parts.append(f"p falls from {value(b.transition[0])} to {value(b.transition[1])} (10 % to 90 % of its drop)")
+    return "; ".join(parts)
 
 
 def _trials_table(o: Outcome) -> str:

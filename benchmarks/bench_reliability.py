@@ -1,0 +1,159 @@
+"""Calibration by simulation: does the reliability search state what is true?
+
+Bernoulli systems with a known p(severity) (no SLAM: the search and the fit are what is
+measured) on lens_soiling.particles' range, 0..1000 particles, edge 100, R = 0.8, C = 0.9,
+max_runs = 30 (the defaults), each over N seeded sessions:
+
+- logistic: p = expit(-(v - 600) / 50);
+- plateau: p = 1 - 0.5 expit((v - 650) / 80), falling to 0.5 like ORB-SLAM3 under soiling;
+- step: p = 1 below 620.3 particles, else 0 (a deterministic cliff).
+
+Per truth: how often the stated 90 % interval of s80 covers the true s80, how often the
+one-sided bound s80/90 lies on the mild side of it (both should be at least C - 2 %), the
+verdicts, and the runs. Against it, today's votes on the same truths (bisection, a trial is a
+vote of runs until one verdict leads by 2, at most 5, the bracket's ends confirmed to a lead of
+3, at most 7): how often the bracket holds the true s80 and s50, its runs, and how far apart
+two sessions' brackets lie. Then the gate: unchanged sessions compared pairwise against a
+baseline (false alarms of boundary:10 %), and sessions of a system whose s80 moved 20 % toward
+the mild side (detections).
+
+Usage: python benchmarks/bench_reliability.py [--sessions 500] [--processes 2]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from collections.abc import Callable
+from multiprocessing import Pool
+
+import numpy as np
+from scipy import special
+
+from pytest_sal.engine.boundary_search import SearchSpace, boundary_search
+from pytest_sal.engine.reliability_compare import regression_probability
+from pytest_sal.engine.reliability_curve import SeverityAxis, fit_curve
+from pytest_sal.engine.reliability_search import reliability_search
+
+R, C, MAX_RUNS, EDGE = 0.8, 0.9, 30, 100.0
+AXIS = SeverityAxis.for_range(0, 1000, False, 0.05, integer=True)
+TRUTHS: dict[str, Callable[[float], float]] = {
+    "logistic": lambda v: float(special.expit(-(v - 600) / 50)),
+    "plateau": lambda v: float(1 - 0.5 * special.expit((v - 650) / 80)),
+    "step": lambda v: float(v < 620.3),
+    "logistic, s80 20 % milder": lambda v: float(special.expit(-(v - 600 * 0.8) / 50)),
+}
+
+
+def true_s(name: str, r: float) -> float:
+    values = np.linspace(0, 1000, 200001)
+    held = np.array([TRUTHS[name](v) for v in values]) >= r
+    return float(values[held].max()) if held.any() else float("nan")
+
+
+def reliability_session(args: tuple[str, int]) -> tuple:
+    """One seeded session of the reliability search: verdict, s80 interval and bound, runs, and
+    the runs themselves (for the gate)."""
+    name, seed = args
+    rng = np.random.default_rng(seed)
+    truth = TRUTHS[name]
+    result = reliability_search(
+        lambda values: [bool(rng.random() < truth(v)) for v in values], AXIS, EDGE, R, C, MAX_RUNS, rel_tolerance=0.1
+    )
+    value = lambda x: float(AXIS.to_value(min(max(x, 0.0), 1.0)))
+    runs = [(o.value, bool(o.held)) for o in result.observations]
+    return result.verdict, value(result.s_r.low), value(result.s_r.high), value(result.s_r.bound), result.runs, runs
+
+
+def vote_session(args: tuple[str, int]) -> tuple:
+    """One seeded session of today's votes: the bracket and the runs."""
+    name, seed = args
+    rng = np.random.default_rng(10_000 + seed)
+    truth = TRUTHS[name]
+    spent = [0]
+
+    class Trial:
+        def __init__(self, value: float):
+            self.value, self.passes, self.fails = value, 0, 0
+
+        def extend(self, lead: int, cap: int) -> bool:
+            while (self.passes + self.fails == 0 or abs(self.passes - self.fails) < lead) and self.passes + self.fails < cap:
+                held = rng.random() < truth(self.value)
+                self.passes += held
+                self.fails += not held
+                spent[0] += 1
+            return self.passes > self.fails
+
+    class Judge:
+        def confirm(self, trial: Trial) -> bool:
+            return trial.extend(3, 7)
+
+        def settled(self, trial: Trial) -> bool:
+            return abs(trial.passes - trial.fails) >= 2
+
+    def evaluate(value: float) -> tuple[bool, Trial]:
+        trial = Trial(value)
+        return trial.extend(2, 5), trial
+
+    space = SearchSpace(mild=0.0, severe=1000.0, domain="integer")
+    result = boundary_search(evaluate, space, EDGE, rel_tolerance=0.1, max_trials=8, judge=Judge())
+    return result.pass_value, result.fail_value, spent[0], result.edge_passed, result.flaky
+
+
+def gate_alarm(before: list[tuple[float, bool]], now: list[tuple[float, bool]]) -> bool:
+    fits = [fit_curve(AXIS, [v for v, _ in runs], [h for _, h in runs]) for runs in (before, now)]
+    return regression_probability(fits[0], fits[1], R, 10.0, True, "higher") >= C
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sessions", type=int, default=500)
+    parser.add_argument("--processes", type=int, default=2)
+    args = parser.parse_args()
+    n = args.sessions
+    runs_of: dict[str, list] = {}
+    print(f"{n} sessions per truth; R = {R}, C = {C}, max_runs = {MAX_RUNS}, edge {EDGE:g} particles, grid step {AXIS.step:g}\n")
+    print("| truth | true s80 | interval covers s80 | bound <= s80 | verdicts (passed/failed/inconclusive) | runs (mean) | seconds |")
+    print("|---|---:|---:|---:|---|---:|---:|")
+    with Pool(args.processes) as pool:
+        for name in TRUTHS:
+            start = time.perf_counter()
+            results = pool.map(reliability_session, [(name, seed) for seed in range(n)])
+            s80 = true_s(name, R)
+            covered = np.mean([low <= s80 <= high for _, low, high, _, _, _ in results])
+            below = np.mean([bound <= s80 for _, _, _, bound, _, _ in results])
+            verdicts = "/".join(str(sum(r[0] == v for r in results)) for v in ("passed", "failed", "inconclusive"))
+            runs = np.mean([r[4] for r in results])
+            runs_of[name] = [r[5] for r in results]
+            print(
+                f"| {name} | {s80:.1f} | {covered:.3f} | {below:.3f} | {verdicts} | {runs:.1f} | {time.perf_counter() - start:.0f} |",
+                flush=True,
+            )
+
+        print("\nToday's votes on the same truths:\n")
+        print("| truth | bracket holds s80 | bracket holds s50 | brackets of two sessions overlap | runs (mean) | edge flaky |")
+        print("|---|---:|---:|---:|---:|---:|")
+        for name in list(TRUTHS)[:3]:
+            votes = pool.map(vote_session, [(name, seed) for seed in range(n)])
+            s80, s50 = true_s(name, R), true_s(name, 0.5)
+            brackets = [(min(p, f), max(p, f)) for p, f, _, _, _ in votes if p is not None and f is not None]
+
+            def holds(s: float, brackets: list[tuple[float, float]] = brackets) -> float:
+                return float(np.mean([lo <= s <= hi for lo, hi in brackets]))
+
+            overlap = np.mean([a[0] <= b[1] and b[0] <= a[1] for a, b in zip(brackets[::2], brackets[1::2])])
+            runs = np.mean([v[2] for v in votes])
+            flaky = np.mean([v[4] for v in votes])
+            print(f"| {name} | {holds(s80):.3f} | {holds(s50):.3f} | {overlap:.3f} | {runs:.1f} | {flaky:.3f} |", flush=True)
+
+        print("\nThe gate (boundary:10 %, R = 0.8, C = 0.9): each session against the one before as its baseline:\n")
+        print("| baseline | this run | comparisons | regressions declared |")
+        print("|---|---|---:|---:|")
+        for baseline, current in (("logistic", "logistic"), ("plateau", "plateau"), ("logistic", "logistic, s80 20 % milder")):
+            pairs = [(runs_of[baseline][i], runs_of[current][i + 1]) for i in range(n - 1)]
+            alarms = pool.starmap(gate_alarm, pairs)
+            print(f"| {baseline} | {current} | {len(pairs)} | {np.mean(alarms):.3f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
