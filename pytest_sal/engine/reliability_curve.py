@@ -43,8 +43,8 @@ from scipy import special, stats
 __all__ = ["CurveFit", "SeverityAxis", "fit_curve"]
 
 #: lapse rates (1 - ceiling) and floors of the grid; their priors are Beta(1, 10) and Beta(1, 3)
-_LAPSES = np.array([0.0, 0.02, 0.05, 0.1, 0.15, 0.2, 0.3, 0.4])
-_FLOORS = np.array([0.0, 0.05, 0.15, 0.25, 0.35, 0.45, 0.55, 0.7])
+_LAPSES = np.array([0.0, 0.02, 0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.4])
+_FLOORS = np.array([0.0, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7])
 _LAPSE_PRIOR = stats.beta(1, 10)
 _FLOOR_PRIOR = stats.beta(1, 3)
 #: widths of the grid: log-spaced from a step (a fraction of a grid cell) to the whole range

@@ -31,8 +31,8 @@ __all__ = ["Observation", "ReliabilityResult", "more_runs_needed", "reliability_
 
 #: at most this many grid values are scored before each round (spread over where s_R may lie)
 _CANDIDATES = 20
-#: while the verdict is open, its entropy weighs this much against s_R's (nats against nats)
-_VERDICT_WEIGHT = 4.0
+#: while the verdict is open, its entropy weighs this much against s_R's: the verdict first (it decides the test)
+_VERDICT_WEIGHT = 20.0
 #: a cached value is taken when its gain is at least this share of the best value's
 _CACHED_SHARE = 0.5
 
@@ -166,12 +166,15 @@ def _fit(fit: CurveFit, observations: Sequence[Observation]) -> CurveFit:
 
 
 def _within_tolerance(axis: SeverityAxis, s_r: Interval, tolerance: float | None, rel_tolerance: float | None) -> bool:
-    """``s_R``'s interval is within tolerance, within two cells of the grid (runs on the grid
-    cannot narrow it further), or wholly beyond one end of the range."""
+    """``s_R``'s interval is within tolerance, within two cells of the grid or one unit of an
+    integer parameter (runs on the grid cannot narrow it further), or wholly beyond one end of
+    the range."""
     if s_r.low >= 1 or s_r.high <= 0 or s_r.high - s_r.low <= 2 * axis.step * (1 + 1e-9):
         return True
     low, high = (float(axis.to_value(min(max(x, 0.0), 1.0))) for x in (s_r.low, s_r.high))
     spread = abs(high - low)
+    if axis.integer and spread <= 1:  # whole numbers cannot resolve it further
+        return True
     if tolerance is not None:
         return spread <= tolerance
     return rel_tolerance is not None and spread <= rel_tolerance * max(abs(low), abs(high))

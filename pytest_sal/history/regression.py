@@ -229,6 +229,13 @@ def regressions(checks: list[RegressionCheck], current: Outcome, previous: Outco
             f"not compared: the history has {current.parameter} in {previous.boundary.unit or 'no unit'!r}, this run in "
             f"{current.boundary.unit or 'no unit'!r}; save a new baseline with --sal-save"
         ]
+    if current.boundary.noisy != previous.boundary.noisy and previous.parameter == current.parameter:
+        kinds = {True: "statistical (a noisy system's s_R, fitted from its runs)", False: "a bisection's failure point"}
+        return [
+            f"not compared: the baseline's {current.parameter} boundary is {kinds[previous.boundary.noisy]}, this run's is "
+            f"{kinds[current.boundary.noisy]} (history written before pytest-sal fitted noisy systems, or the system changed); "
+            "save a new baseline with --sal-save"
+        ]
     return [message for check in checks if (message := check.fails(current, previous)) is not None]
 
 
