@@ -179,6 +179,12 @@ def test_robustness_boundary_checks(tmp_path: Path) -> None:
     assert "robustness_boundary.tolerance: 0 is not valid" in with_rb(tolerance=0)
     assert "robustness_boundary.max_iters: 0 is not valid; must be an integer >= 1" in with_rb(max_iters=0)
     assert "robustness_boundary.ate_rmse_fail: -1 m is not valid" in with_rb(ate_rmse_fail=-1)
+    assert "robustness_boundary.reliability: 1.5 is not valid; must be a probability between 0 and 1 (both excluded)" in with_rb(
+        reliability=1.5
+    )
+    assert "robustness_boundary.confidence: 0.3 is not valid; must be a probability between 0.5 and 1" in with_rb(confidence=0.3)
+    assert "robustness_boundary.max_runs: 0 is not valid; must be an integer >= 1" in with_rb(max_runs=0)
+    assert "robustness_boundary.max_runs: 20000 is not valid; the limit is 10000 runs" in with_rb(max_runs=20000)
     assert (
         "robustness_boundary.parameter: composite 'combo' has no parameter 'fog.visibility'; did you mean 'fog.visibility_m'?"
         in with_rb(target_perturbation="combo", parameter="fog.visibility")
@@ -187,6 +193,10 @@ def test_robustness_boundary_checks(tmp_path: Path) -> None:
     config["robustness_boundary"].update(target_perturbation="combo", parameter="fog.visibility_m")
     rb = load_config(write(tmp_path, config)).robustness_boundary
     assert rb is not None and rb.module == "fog" and rb.name == "combo_fog_visibility_m"
+    assert (rb.reliability, rb.confidence, rb.max_runs) == (0.8, 0.9, 30)  # the plugin's defaults
+    config["robustness_boundary"].update(reliability=0.9, confidence=0.95, max_runs=60)
+    rb = load_config(write(tmp_path, config)).robustness_boundary
+    assert rb is not None and (rb.reliability, rb.confidence, rb.max_runs) == (0.9, 0.95, 60)
 
 
 def test_yaml_syntax_error_and_duplicate_key_name_the_line(tmp_path: Path) -> None:

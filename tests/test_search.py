@@ -261,8 +261,18 @@ def test_misuse_says_what_to_write_instead(items, message: str) -> None:
             lambda: sal.require(ate_rmse < 1, fog.visibility_m >= 25, search_range=(30, 30)),
             "search_range (30, 30) must be two finite numbers low < high, in m",
         ),
+        (
+            lambda: sal.require(ate_rmse < 1, fog.visibility_m >= 25, reliability=1.0),
+            "reliability must be a probability between 0 and 1 (both excluded), got 1.0",
+        ),
+        (
+            lambda: sal.require(ate_rmse < 1, fog.visibility_m >= 25, confidence=0.4),
+            "confidence must be a probability between 0.5 and 1 (both excluded), got 0.4",
+        ),
+        (lambda: sal.require(ate_rmse < 1, fog.visibility_m >= 25, confidence=float("nan")), "confidence must be a probability"),
+        (lambda: sal.require(ate_rmse < 1, fog.visibility_m >= 25, max_runs=0), "max_runs must be a whole number >= 1, got 0"),
     ],
-    ids=["ate<0", "ate>=0", "rate>=1.5", "rate<=1", "range-outside", "range-empty"],
+    ids=["ate<0", "ate>=0", "rate>=1.5", "rate<=1", "range-outside", "range-empty", "reliability=1", "confidence=0.4", "nan", "runs=0"],
 )
 def test_a_requirement_that_cannot_fail_or_cannot_pass_is_refused(build, message: str) -> None:
     with pytest.raises(InvalidRequirement, match=re.escape(message)):
