@@ -1,5 +1,6 @@
-"""The plugin with the real ORB-SLAM3 (pyorbslam3): one ``sal.require`` search of two trials in an
-inner pytest session (``pytester``), the session's vocabulary passed through the environment.
+"""The plugin with the real ORB-SLAM3 (pyorbslam3): one ``sal.require`` search of a noisy system
+(at most 6 runs, reliability 0.5) in an inner pytest session (``pytester``), the session's
+vocabulary passed through the environment.
 The plugin's behaviour on ``FakeSlam`` is in test_plugin_requirements.py."""
 
 from __future__ import annotations
@@ -32,18 +33,20 @@ def test_orbslam3_through_the_plugin(pytester: pytest.Pytester, monkeypatch: pyt
         test_orb=HEADER
         + """
 
-@sal.require(tracking_rate >= 0.5, fog.visibility_m >= 200, max_trials=2)
+@sal.require(tracking_rate >= 0.5, fog.visibility_m >= 200, reliability=0.5, max_runs=6)
 def test_mild_fog(sal_outcome):
     assert sal_outcome.system == "orbslam3" and sal_outcome.verdict == "passed"
     edge = sal_outcome.trials[0]
     assert edge.value == 200 and edge.passed and not edge.cached
     assert edge.runs[0]["tracking_rate"] > 0.5
-    assert len(sal_outcome.trials) == 2
+    boundary = sal_outcome.boundary
+    assert boundary.noisy and boundary.reliability == 0.5 and boundary.holds_at_edge >= 0.9
+    assert boundary.runs == sum(len(t.runs) for t in sal_outcome.trials) <= 6
 """
     )
     result = run(pytester, [], "-v", "--junitxml=out.xml")
     result.assert_outcomes(passed=1)
     found = outcomes(pytester.path / "out.xml")["test_mild_fog"]
     assert found["system"] == "orbslam3" and found["system_options"]["vocabulary"] == str(orb_vocabulary)
-    has_line(result, "test_mild_fog", "PASSED (fog.visibility_m boundary")
+    has_line(result, "test_mild_fog", "PASSED (fog.visibility_m boundary s50/90")
     assert math.isfinite(found["trials"][0]["metrics"]["tracking_rate"])
