@@ -221,13 +221,11 @@ def test_hints_go_in_one_round() -> None:
 # -- through the TrialRunner: an executor with k free slots ------------------------------------------------------
 
 
-def fake_runner(tmp_path: Path, k: int, runs: int | None = None) -> TrialRunner:
+def fake_runner(tmp_path: Path, k: int) -> TrialRunner:
     dataset = open_dataset("synthetic", scene="indoor", frames=8, sensor="rgbd")
     requirement = Requirement.build([tracking_rate >= 0.5, fog.visibility_m >= 25], search_range=(1.0, 200.0))
     system = FakeSlam()  # tracks round(8 * v / 40) of 8 frames: passes from 17.5 m (4 of 8), fails below
-    return TrialRunner(
-        dataset, fog.visibility_m.ref(), system, requirement, runs=runs, workdir=tmp_path / f"work{k}", executor=InProcessSlots(k)
-    )
+    return TrialRunner(dataset, fog.visibility_m.ref(), system, requirement, workdir=tmp_path / f"work{k}", executor=InProcessSlots(k))
 
 
 def test_free_slots_give_the_same_outcome_in_fewer_rounds_through_the_runner(tmp_path: Path) -> None:
@@ -256,11 +254,10 @@ def test_free_slots_give_the_same_outcome_in_fewer_rounds_through_the_runner(tmp
     assert not any(t.speculative for t in Outcome.from_dict(stored).trials)
 
 
-def test_the_width_is_free_runs_over_the_runs_a_trial_needs(tmp_path: Path) -> None:
+def test_the_width_is_the_free_runs_one_a_trial(tmp_path: Path) -> None:
     assert search_width(fake_runner(tmp_path, 4)) == 4  # deterministic: one run a trial
-    assert search_width(fake_runner(tmp_path, 4, runs=5)) == 2  # a vote starts with lead 2 runs
-    assert search_width(fake_runner(tmp_path, 1, runs=5)) == 1
-    assert search_width(fake_runner(tmp_path, 5, runs=5)) == 2
+    assert search_width(fake_runner(tmp_path, 1)) == 1
+    assert search_width(fake_runner(tmp_path, 0)) == 1  # no free slot now: still one trial a round
 
 
 def test_a_search_cached_along_its_path_sends_no_run_and_does_not_speculate(tmp_path: Path) -> None:

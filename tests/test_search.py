@@ -11,7 +11,8 @@ import pytest_sal as sal
 from pytest_sal import InvalidRequirement, ate_rmse, tracking_rate
 from pytest_sal.engine.boundary_search import SearchSpace, boundary_search
 from pytest_sal.engine.requirements import Requirement
-from pytest_sal.engine.trial_runner import VotePolicy
+from pytest_sal.engine.trial_runner import NOISY_RUNS, RunPolicy
+from pytest_sal.testing import FakeSlam
 from sal_modules import fog, frame_drop, motion_blur, night, rain, sensor_noise
 
 FOG = SearchSpace(mild=100_000.0, severe=1.0)  # visibility gets worse when lower
@@ -87,12 +88,12 @@ def test_contradictions_are_reported() -> None:
     assert "10 passed but the milder 15 failed" in result.contradictions
 
 
-def test_vote_policy_stops_at_the_lead_or_the_cap() -> None:
-    policy = VotePolicy(max_runs=5)
-    assert policy.more(1, 0) and not policy.more(2, 0) and policy.more(2, 1) and not policy.more(3, 1)
-    assert not policy.more(3, 2)  # 5 runs: the cap
-    assert policy.more(2, 0, confirming=True) and not policy.more(3, 0, confirming=True) and not policy.more(4, 3, confirming=True)
-    assert not VotePolicy(max_runs=1).more(1, 0) and not VotePolicy(max_runs=1).noisy
+def test_run_policy_is_noisy_above_one_run_per_trial() -> None:
+    # runs given decide; not given: 1 for a deterministic system, NOISY_RUNS for a noisy one
+    steady, noisy = FakeSlam(), FakeSlam(flaky=0.3)
+    assert not RunPolicy.for_system(steady, None).noisy and RunPolicy.for_system(noisy, None).max_runs == NOISY_RUNS
+    assert RunPolicy.for_system(steady, 3).noisy and RunPolicy.for_system(steady, 3).max_runs == 3
+    assert not RunPolicy.for_system(noisy, 1).noisy and not RunPolicy().noisy
 
 
 # -- the requirement language ------------------------------------------------------------------

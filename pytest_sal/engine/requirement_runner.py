@@ -51,9 +51,9 @@ def search_space(ref: ParamRef, search_range: tuple[float, float] | None = None)
 
 def search_width(runner: TrialRunner) -> int:
     """How many trials a round of the search may hold now: the runs ``runner``'s executor can
-    take at once over the runs a trial's first vote needs (1 for a deterministic system, the
-    lead for a noisy one); at least 1 (``local``: always 1, the sequential search)."""
-    return max(1, runner.executor.slots(runner.system) // runner.policy.needed(0, 0))
+    take at once (a deterministic system's trial is one run); at least 1 (``local``: always 1,
+    the sequential search)."""
+    return max(1, runner.executor.slots(runner.system))
 
 
 def run_search(
@@ -140,7 +140,6 @@ def single_outcome(
     if runner.policy.noisy:
         return _noisy_outcome(runner, requirement, settings or SearchSettings(), test_id, value, single=True, earlier=earlier)
     trial = runner.evaluate(value)
-    runner.confirm(trial)
     boundary = Boundary(value if trial.passed else None, None if trial.passed else value, runner.ref.unit)
     return _outcome(runner, requirement, test_id, "passed" if trial.passed else "failed", boundary, "single", [trial], [])
 
