@@ -12,10 +12,10 @@ Per truth: how often the stated 90 % interval of s80 covers the true s80, how of
 one-sided bound s80/90 lies on the mild side of it (both should be at least C - 2 %), the
 verdicts, and the runs. Against it, the votes it replaced, simulated here (``vote_bisection``:
 bisection, a trial is a vote of runs until one verdict leads by 2, at most 5, the edge and the
-bracket's ends confirmed to a lead of 3, at most 7): how often the bracket holds the true s80 and s50, its runs, and how far apart
-two sessions' brackets lie. Then the gate: unchanged sessions compared pairwise against a
-baseline (false alarms of boundary:10 %), and sessions of a system whose s80 moved 20 % toward
-the mild side (detections).
+bracket's ends confirmed to a lead of 3, at most 7): how often the bracket holds the true s80
+and s50, its runs, and how far apart two sessions' brackets lie. Then the gate: unchanged
+sessions compared pairwise against a baseline (false alarms of boundary:10 %), and sessions of
+a system whose s80 moved 20 % toward the mild side (detections).
 
 Usage: python benchmarks/bench_reliability.py [--sessions 500] [--processes 2]
 """

@@ -1,5 +1,5 @@
 """RayExecutor on a two-node Ray cluster on this machine (ray.cluster_utils.Cluster: two raylets,
-1 CPU each, both on 127.0.0.1): the runs of one vote go to both nodes at once, the outcome is the
+1 CPU each, both on 127.0.0.1): runs added together go to both nodes at once, the outcome is the
 local executor's, every port stays on loopback, and closing the executor leaves the cluster it
 joined running."""
 
