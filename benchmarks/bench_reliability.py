@@ -10,12 +10,12 @@ max_runs = 30 (the defaults), each over N seeded sessions:
 
 Per truth: how often the stated 90 % interval of s80 covers the true s80, how often the
 one-sided bound s80/90 lies on the mild side of it (both should be at least C - 2 %), the
-verdicts, and the runs. Against it, today's votes on the same truths (bisection, a trial is a
-vote of runs until one verdict leads by 2, at most 5, the bracket's ends confirmed to a lead of
-3, at most 7): how often the bracket holds the true s80 and s50, its runs, and how far apart
-two sessions' brackets lie. Then the gate: unchanged sessions compared pairwise against a
-baseline (false alarms of boundary:10 %), and sessions of a system whose s80 moved 20 % toward
-the mild side (detections).
+verdicts, and the runs. Against it, the votes it replaced, simulated here (``vote_bisection``:
+bisection, a trial is a vote of runs until one verdict leads by 2, at most 5, the edge and the
+bracket's ends confirmed to a lead of 3, at most 7): how often the bracket holds the true s80
+and s50, its runs, and how far apart two sessions' brackets lie. Then the gate: unchanged
+sessions compared pairwise against a baseline (false alarms of boundary:10 %), and sessions of
+a system whose s80 moved 20 % toward the mild side (detections).
 
 Usage: python benchmarks/bench_reliability.py [--sessions 500] [--processes 2]
 """
@@ -30,7 +30,7 @@ from multiprocessing import Pool
 import numpy as np
 from scipy import special
 
-from pytest_sal.engine.boundary_search import SearchSpace, boundary_search
+from pytest_sal.engine.boundary_search import SearchSpace
 from pytest_sal.engine.reliability_compare import regression_probability
 from pytest_sal.engine.reliability_curve import SeverityAxis, fit_curve
 from pytest_sal.engine.reliability_search import reliability_search
@@ -65,39 +65,91 @@ def reliability_session(args: tuple[str, int]) -> tuple:
     return result.verdict, value(result.s_r.low), value(result.s_r.high), value(result.s_r.bound), result.runs, runs
 
 
+class VoteTrial:
+    """A trial of the votes: runs of a Bernoulli system at ``value``, drawn from ``rng``."""
+
+    def __init__(self, value: float, truth: Callable[[float], float], rng: np.random.Generator, spent: list[int]):
+        self.value, self.truth, self.rng, self.spent = value, truth, rng, spent
+        self.passes = self.fails = 0
+        self.passed = False
+
+    def extend(self, lead: int, cap: int) -> bool:
+        """Runs until one verdict leads by ``lead`` or ``cap`` runs are spent; the verdict."""
+        while (self.passes + self.fails == 0 or abs(self.passes - self.fails) < lead) and self.passes + self.fails < cap:
+            held = self.rng.random() < self.truth(self.value)
+            self.passes += held
+            self.fails += not held
+            self.spent[0] += 1
+        self.passed = self.passes > self.fails
+        return self.passed
+
+
+def vote_bisection(
+    trial: Callable[[float], VoteTrial], space: SearchSpace, edge: float, rel_tolerance: float, max_trials: int
+) -> tuple[float | None, float | None, bool, bool]:
+    """The votes, sequentially (the bisection pytest-sal ran for noisy systems before the
+    reliability search): a trial votes to a lead of 2 (at most 5 runs); the edge, a far end that
+    agrees with it and the final bracket's ends are confirmed to a lead of 3 (at most 7); when
+    a confirmation turns an end, bisection goes on in the rebuilt bracket while trials are left.
+    ``(pass_value, fail_value, edge_passed, flaky)``; flaky: the edge never led by 2."""
+    trials: list[VoteTrial] = []
+
+    def run(value: float) -> VoteTrial:
+        trials.append(trial(value))
+        trials[-1].extend(2, 5)
+        return trials[-1]
+
+    def bracket() -> tuple[float | None, float | None]:
+        passing: float | None = None
+        failing: float | None = None
+        worse = space.worse
+        for t in trials:
+            if t.passed and (passing is None or worse(t.value, passing)) and (failing is None or worse(failing, t.value)):
+                passing = t.value
+            if not t.passed and (failing is None or worse(failing, t.value)) and (passing is None or worse(t.value, passing)):
+                failing = t.value
+        return passing, failing
+
+    first = run(edge)
+    first.extend(3, 7)
+    flaky = abs(first.passes - first.fails) < 2
+    far = space.severe if first.passed else space.mild
+    if None in bracket() and len(trials) < max_trials and all(t.value != far for t in trials) and run(far).passed == first.passed:
+        trials[-1].extend(3, 7)  # "never failed/passed" is a claim to confirm
+    while True:
+        passing, failing = bracket()
+        if passing is None or failing is None:
+            break
+        while True:  # bisect to the tolerance, the integer resolution or the budget
+            passing, failing = bracket()
+            assert passing is not None and failing is not None
+            mid = space.midpoint(passing, failing)
+            width = abs(passing - failing)
+            if width <= rel_tolerance * max(abs(passing), abs(failing)) or space.neighbours(passing, failing):
+                break
+            if len(trials) >= max_trials or not min(passing, failing) < mid < max(passing, failing):
+                break
+            run(mid)
+        ends = [next(t for t in reversed(trials) if t.value == value) for value in bracket()]
+        before = [t.passed for t in ends]
+        for t in ends:
+            t.extend(3, 7)
+        if [t.passed for t in ends] == before or len(trials) >= max_trials:
+            break
+    passing, failing = bracket()
+    return passing, failing, first.passed, flaky
+
+
 def vote_session(args: tuple[str, int]) -> tuple:
-    """One seeded session of today's votes: the bracket and the runs."""
+    """One seeded session of the votes: the bracket and the runs."""
     name, seed = args
     rng = np.random.default_rng(10_000 + seed)
-    truth = TRUTHS[name]
     spent = [0]
-
-    class Trial:
-        def __init__(self, value: float):
-            self.value, self.passes, self.fails = value, 0, 0
-
-        def extend(self, lead: int, cap: int) -> bool:
-            while (self.passes + self.fails == 0 or abs(self.passes - self.fails) < lead) and self.passes + self.fails < cap:
-                held = rng.random() < truth(self.value)
-                self.passes += held
-                self.fails += not held
-                spent[0] += 1
-            return self.passes > self.fails
-
-    class Judge:
-        def confirm(self, trial: Trial) -> bool:
-            return trial.extend(3, 7)
-
-        def settled(self, trial: Trial) -> bool:
-            return abs(trial.passes - trial.fails) >= 2
-
-    def evaluate(value: float) -> tuple[bool, Trial]:
-        trial = Trial(value)
-        return trial.extend(2, 5), trial
-
     space = SearchSpace(mild=0.0, severe=1000.0, domain="integer")
-    result = boundary_search(evaluate, space, EDGE, rel_tolerance=0.1, max_trials=8, judge=Judge())
-    return result.pass_value, result.fail_value, spent[0], result.edge_passed, result.flaky
+    passing, failing, edge_passed, flaky = vote_bisection(
+        lambda value: VoteTrial(value, TRUTHS[name], rng, spent), space, EDGE, rel_tolerance=0.1, max_trials=8
+    )
+    return passing, failing, spent[0], edge_passed, flaky
 
 
 def gate_alarm(before: list[tuple[float, bool]], now: list[tuple[float, bool]]) -> bool:
@@ -130,7 +182,7 @@ def main() -> None:
                 flush=True,
             )
 
-        print("\nToday's votes on the same truths:\n")
+        print("\nThe votes (bisection, before the reliability search) on the same truths:\n")
         print("| truth | bracket holds s80 | bracket holds s50 | brackets of two sessions overlap | runs (mean) | edge flaky |")
         print("|---|---:|---:|---:|---:|---:|")
         for name in list(TRUTHS)[:3]:

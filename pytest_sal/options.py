@@ -196,7 +196,7 @@ INI_KEYS: tuple[tuple[str, str, str | None], ...] = (
     ("sal_max_runs", "noisy systems: the most runs of one requirement's search (default 30)", "30"),
     (
         "sal_runs",
-        "the most runs per trial; runs vote until one verdict leads by 2 (default auto: 1 for a deterministic system, 5 for a noisy one)",
+        "the most runs per trial; above 1 the system is searched as a noisy one (default auto: 1 for a deterministic system, 5 for a noisy one)",
         "auto",
     ),
     ("sal_seed", "perturbation seed (default 0)", "0"),

@@ -153,8 +153,8 @@ def pytest_runtest_setup(item: pytest.Item) -> None:
 @pytest.fixture
 def sal_runs(request: pytest.FixtureRequest) -> int | None:
     """The most runs per trial: ``runs=`` of ``sal.require``, else ini ``sal_runs``, else
-    ``None`` (1 for a deterministic system, 5 for a noisy one such as ORB-SLAM3, which vote
-    until one verdict leads by 2 runs). Override in conftest.py for every test."""
+    ``None`` (1 for a deterministic system, 5 for a noisy one such as ORB-SLAM3); above 1 the
+    system is searched as a noisy one (its chance to hold). Override in conftest.py for every test."""
     requirement = getattr(request.function, "sal_requirement", None)
     if requirement is not None and "runs" in requirement.options:
         return int(requirement.options["runs"])

@@ -39,7 +39,7 @@ SLOW_MODULES = {
     "test_experiment_fuzz.py",  # the config fuzz test, hundreds of generated and mutated configs (~45 s)
     "test_early_stop_real.py",  # reference_vo on KITTI 07 and EuRoC at night, stopped and full (18 s; test_early_stop.py stays)
     "test_ray_executor.py",  # a local Ray (4-6 s to start), searches on it, killed and hung workers (~25 s)
-    "test_ray_cluster.py",  # a two-node Ray cluster (3-5 s to start), searches and a vote on both nodes (~23 s)
+    "test_ray_cluster.py",  # a two-node Ray cluster (3-5 s to start), searches and runs on both nodes (~23 s)
     "test_ray_plugin.py",  # pytest -n 2 --sal-executor ray sessions in subprocesses, each starting a Ray (~25 s)
 }
 #: Single tests marked ``slow`` in otherwise fast modules, as ``module::name`` (``module::Class::name``

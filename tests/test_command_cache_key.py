@@ -212,11 +212,12 @@ def test_a_too_big_depends_folder_is_a_clear_error(tmp_path, monkeypatch):
 
 
 def test_a_command_system_is_noisy_unless_it_says_it_is_deterministic() -> None:
-    from pytest_sal.engine.trial_runner import VotePolicy
+    from pytest_sal.engine.trial_runner import RunPolicy
 
     noisy = create("command", argv=["true"])
     steady = create("command", argv=["true"], deterministic=True)
-    assert VotePolicy.for_system(noisy, None).max_runs == 5 and VotePolicy.for_system(steady, None).max_runs == 1
+    assert RunPolicy.for_system(noisy, None).max_runs == 5 and RunPolicy.for_system(steady, None).max_runs == 1
+    assert RunPolicy.for_system(noisy, None).noisy and not RunPolicy.for_system(steady, None).noisy
     assert steady.options()["deterministic"] and steady.identity() != noisy.identity()
     with pytest.raises(SlamSystemError, match="deterministic must be True or False, got 'yes'"):
         create("command", argv=["true"], deterministic="yes")

@@ -81,7 +81,7 @@ class BoundaryChecks:
     system = ""
 
     def test_tree_holds_the_summary_the_plot_and_a_folder_per_slam_run(self, searched: Searched) -> None:
-        """One run per trial for the deterministic reference VO, a vote of at least 2 for ORB-SLAM3."""
+        """One run per trial for the deterministic reference VO, at least 2 runs a trial for ORB-SLAM3 (noisy)."""
         first, system = searched.first, searched.system
         assert set(searched.summary) == {"outcome", "experiment"}  # Outcome.to_dict(), and what only the experiment knows
         where = f"robustness_boundary/{system}/{BOUNDARY['name']}/"

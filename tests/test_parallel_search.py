@@ -11,7 +11,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
-import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -21,7 +20,7 @@ from pytest_sal.engine.boundary_search import SearchResult, SearchSpace, _Search
 from pytest_sal.engine.outcome import Outcome
 from pytest_sal.engine.requirement_runner import SearchSettings, run_search, search_outcome, search_width
 from pytest_sal.engine.requirements import Requirement
-from pytest_sal.engine.trial_runner import TrialRunner, VotePolicy
+from pytest_sal.engine.trial_runner import TrialRunner
 from pytest_sal.report.formatting import trial_line
 from pytest_sal.testing import FakeSlam, InProcessSlots
 from sal_adapters import open_dataset
@@ -195,110 +194,38 @@ def test_the_budget_counts_the_path_and_speculation_stops_where_it_ends() -> Non
     assert result.speculative == 1  # 750: level 2 would be a fifth trial on the path
 
 
-def test_hints_go_in_one_round_and_both_ends_are_confirmed_together() -> None:
+def test_hints_go_in_one_round() -> None:
     active, most = [0], [0]
     lock = threading.Lock()
 
-    class SlowJudge:
-        def confirm(self, info: float) -> bool:
-            with lock:
-                active[0] += 1
-                most[0] = max(most[0], active[0])
-            time.sleep(0.05)
-            with lock:
-                active[0] -= 1
-            return info >= 14.3
-
-        def settled(self, info: float) -> bool:
-            return True
+    def slow(value: float) -> tuple[bool, float]:
+        with lock:
+            active[0] += 1
+            most[0] = max(most[0], active[0])
+        time.sleep(0.05)
+        with lock:
+            active[0] -= 1
+        return value >= 14.3, value
 
     space = SearchSpace(mild=30.0, severe=10.0)
 
     def search(k: int) -> SearchResult:
-        return boundary_search(
-            lambda v: (v >= 14.3, v), space, 25, tolerance=1, max_trials=12, warm_start=(15.0, 13.0), judge=SlowJudge(), width=fixed(k)
-        )
+        return boundary_search(slow, space, 25, tolerance=1, max_trials=12, warm_start=(15.0, 13.0), width=fixed(k))
 
     sequential, parallel = search(1), search(2)
     assert (parallel.pass_value, parallel.fail_value) == (sequential.pass_value, sequential.fail_value) == (15.0, 14.0)
-    # edge, its confirmation, the hints, bisection to 14-15 (14.0: one trial), both ends
-    assert sequential.rounds == 1 + 1 + 2 + 1 + 2 and parallel.rounds == 1 + 1 + 1 + 1 + 1 and most[0] == 2
-
-
-@pytest.mark.parametrize("k", [1, 3, 7])
-def test_a_confirmation_that_turns_an_end_still_rebuilds_the_bracket(k: int) -> None:
-    # an unlucky first look makes 17.5 m fail; confirming the fail end shows it passes
-    first_look = {17.5: False}
-    lock = threading.Lock()
-
-    class Confirming:
-        def confirm(self, info: float) -> bool:
-            return info >= 14.3
-
-        def settled(self, info: float) -> bool:
-            return True
-
-    def evaluate(value: float) -> tuple[bool, float]:
-        with lock:
-            return first_look.pop(value, value >= 14.3), value
-
-    space = SearchSpace(mild=30.0, severe=10.0)
-    result = boundary_search(evaluate, space, edge=25, tolerance=1, max_trials=12, judge=Confirming(), width=fixed(k))
-    assert result.fail_value is not None and result.pass_value is not None
-    assert result.fail_value < 14.3 <= result.pass_value and result.pass_value - result.fail_value <= 1
-    assert result.termination == "tolerance"
-    assert [t.passed for t in result.trials if t.value == 17.5] == [True]  # turned by the confirmation
-
-
-class NoisyVotes:
-    """A noisy system that truly fails below 14.3 m; each run gives the wrong verdict with
-    probability 1/6, drawn from (seed, value, run number), so threads cannot change it. Trials
-    vote by ``VotePolicy``; it is the search's ``Judge``."""
-
-    def __init__(self, seed: int, policy: VotePolicy):
-        self.seed, self.policy = seed, policy
-
-    def _extend(self, value: float, votes: list[bool], confirming: bool) -> bool:
-        while not votes or self.policy.more(sum(votes), len(votes) - sum(votes), confirming):
-            unlucky = np.random.default_rng([self.seed, int(value * 1e6), len(votes)]).random() < 1 / 6
-            votes.append((value >= 14.3) != unlucky)
-        return 2 * sum(votes) > len(votes)
-
-    def evaluate(self, value: float) -> tuple[bool, tuple[float, list[bool]]]:
-        votes: list[bool] = []
-        return self._extend(value, votes, False), (value, votes)
-
-    def confirm(self, info: tuple[float, list[bool]]) -> bool:
-        return self._extend(info[0], info[1], True)
-
-    def settled(self, info: tuple[float, list[bool]]) -> bool:
-        return abs(2 * sum(info[1]) - len(info[1])) >= self.policy.lead
-
-
-@pytest.mark.parametrize("k", [2, 3, 7])
-def test_a_noisy_search_confirms_the_edge_and_both_final_ends_at_every_width(k: int) -> None:
-    policy = VotePolicy(max_runs=5)
-    for seed in range(10):
-        system = NoisyVotes(seed, policy)
-        result = boundary_search(
-            system.evaluate, SearchSpace(mild=100.0, severe=1.0), 25, rel_tolerance=0.1, max_trials=10, judge=system, width=fixed(k)
-        )
-        ends = [next(t for t in reversed(result.trials) if t.value == v) for v in (result.pass_value, result.fail_value) if v is not None]
-        for trial in [result.trials[0], *ends]:  # confirmed: a lead of 3, or the confirmation's cap of 7 runs
-            votes = trial.info[1]
-            assert not policy.more(sum(votes), len(votes) - sum(votes), confirming=True), (seed, trial.value, votes)
+    # the edge, the hints, bisection to 14-15 (14.0: one trial)
+    assert sequential.rounds == 1 + 2 + 1 and parallel.rounds == 1 + 1 + 1 and most[0] == 2
 
 
 # -- through the TrialRunner: an executor with k free slots ------------------------------------------------------
 
 
-def fake_runner(tmp_path: Path, k: int, runs: int | None = None) -> TrialRunner:
+def fake_runner(tmp_path: Path, k: int) -> TrialRunner:
     dataset = open_dataset("synthetic", scene="indoor", frames=8, sensor="rgbd")
     requirement = Requirement.build([tracking_rate >= 0.5, fog.visibility_m >= 25], search_range=(1.0, 200.0))
     system = FakeSlam()  # tracks round(8 * v / 40) of 8 frames: passes from 17.5 m (4 of 8), fails below
-    return TrialRunner(
-        dataset, fog.visibility_m.ref(), system, requirement, runs=runs, workdir=tmp_path / f"work{k}", executor=InProcessSlots(k)
-    )
+    return TrialRunner(dataset, fog.visibility_m.ref(), system, requirement, workdir=tmp_path / f"work{k}", executor=InProcessSlots(k))
 
 
 def test_free_slots_give_the_same_outcome_in_fewer_rounds_through_the_runner(tmp_path: Path) -> None:
@@ -327,11 +254,10 @@ def test_free_slots_give_the_same_outcome_in_fewer_rounds_through_the_runner(tmp
     assert not any(t.speculative for t in Outcome.from_dict(stored).trials)
 
 
-def test_the_width_is_free_runs_over_the_runs_a_trial_needs(tmp_path: Path) -> None:
+def test_the_width_is_the_free_runs_one_a_trial(tmp_path: Path) -> None:
     assert search_width(fake_runner(tmp_path, 4)) == 4  # deterministic: one run a trial
-    assert search_width(fake_runner(tmp_path, 4, runs=5)) == 2  # a vote starts with lead 2 runs
-    assert search_width(fake_runner(tmp_path, 1, runs=5)) == 1
-    assert search_width(fake_runner(tmp_path, 5, runs=5)) == 2
+    assert search_width(fake_runner(tmp_path, 1)) == 1
+    assert search_width(fake_runner(tmp_path, 0)) == 1  # no free slot now: still one trial a round
 
 
 def test_a_search_cached_along_its_path_sends_no_run_and_does_not_speculate(tmp_path: Path) -> None:

@@ -5,14 +5,14 @@ from __future__ import annotations
 import math
 import re
 
-import numpy as np
 import pytest
 
 import pytest_sal as sal
 from pytest_sal import InvalidRequirement, ate_rmse, tracking_rate
 from pytest_sal.engine.boundary_search import SearchSpace, boundary_search
 from pytest_sal.engine.requirements import Requirement
-from pytest_sal.engine.trial_runner import VotePolicy
+from pytest_sal.engine.trial_runner import NOISY_RUNS, RunPolicy
+from pytest_sal.testing import FakeSlam
 from sal_modules import fog, frame_drop, motion_blur, night, rain, sensor_noise
 
 FOG = SearchSpace(mild=100_000.0, severe=1.0)  # visibility gets worse when lower
@@ -35,7 +35,7 @@ def test_edge_first_then_bisect_to_tolerance() -> None:
     assert asked[0] == 25 and result.edge_passed
     assert result.termination == "tolerance"
     assert result.fail_value < 14.3 <= result.pass_value and result.pass_value - result.fail_value <= 2
-    assert not result.contradictions and not result.flaky
+    assert not result.contradictions
 
 
 def test_a_failing_edge_bisects_toward_the_mild_end() -> None:
@@ -88,96 +88,12 @@ def test_contradictions_are_reported() -> None:
     assert "10 passed but the milder 15 failed" in result.contradictions
 
 
-class VotingSystem:
-    """A noisy system: it truly fails below ``boundary`` m, but each run gives the wrong
-    verdict with probability ``outliers`` (ORB-SLAM3 splits its map in about 1 of 6 clean
-    runs). Trials vote by ``VotePolicy``; it is the ``Judge`` of the search."""
-
-    def __init__(self, boundary: float, outliers: float, seed: int, policy: VotePolicy):
-        self.boundary, self.outliers, self.policy = boundary, outliers, policy
-        self.rng = np.random.default_rng(seed)
-        self.runs = 0
-
-    def _extend(self, value: float, votes: list[bool], confirming: bool) -> bool:
-        truth = value >= self.boundary
-        while not votes or self.policy.more(sum(votes), len(votes) - sum(votes), confirming):
-            self.runs += 1
-            votes.append(truth != bool(self.rng.random() < self.outliers))
-        return 2 * sum(votes) > len(votes)
-
-    def evaluate(self, value: float) -> tuple[bool, tuple[float, list[bool]]]:
-        votes: list[bool] = []
-        return self._extend(value, votes, False), (value, votes)
-
-    def confirm(self, info: tuple[float, list[bool]]) -> bool:
-        return self._extend(info[0], info[1], True)
-
-    def settled(self, info: tuple[float, list[bool]]) -> bool:
-        votes = info[1]
-        return abs(2 * sum(votes) - len(votes)) >= self.policy.lead
-
-
-def test_a_judge_that_cannot_settle_the_edge_makes_the_result_flaky() -> None:
-    class Undecided:
-        def confirm(self, info: object) -> bool:
-            return True
-
-        def settled(self, info: object) -> bool:
-            return False
-
-    result = boundary_search(lambda v: (True, None), FOG, edge=25, tolerance=2, judge=Undecided())
-    assert result.flaky and result.edge_passed
-
-
-def test_a_confirmation_that_turns_an_end_reopens_the_bracket() -> None:
-    # one unlucky run makes 17.5 m look like a failure; confirming the fail end shows it passes
-    first_look = {17.5: False}
-
-    class Confirming:
-        def confirm(self, info: float) -> bool:
-            return info >= 14.3
-
-        def settled(self, info: float) -> bool:
-            return True
-
-    def evaluate(value: float) -> tuple[bool, float]:
-        return first_look.pop(value, value >= 14.3), value
-
-    space = SearchSpace(mild=30.0, severe=10.0)
-    result = boundary_search(evaluate, space, edge=25, tolerance=1, max_trials=12, judge=Confirming())
-    assert result.fail_value < 14.3 <= result.pass_value and result.pass_value - result.fail_value <= 1
-    assert [t.passed for t in result.trials if t.value == 17.5] == [True]  # turned by the confirmation
-
-
-def test_votes_make_a_noisy_boundary_reproducible_where_one_run_is_not() -> None:
-    # 1 run in 6 gives the wrong verdict. With one run per trial, 20 sessions disagree; with
-    # votes (lead 2, ends confirmed by lead 3) every session brackets the true boundary.
-    def sessions(policy: VotePolicy) -> list[tuple[float, float, int]]:
-        found = []
-        for seed in range(20):
-            system = VotingSystem(14.3, 1 / 6, seed, policy)
-            judge = system if policy.noisy else None
-            r = boundary_search(
-                system.evaluate, SearchSpace(mild=100.0, severe=1.0), edge=25, rel_tolerance=0.1, max_trials=10, judge=judge
-            )
-            found.append((r.fail_value, r.pass_value, system.runs))
-        return found
-
-    voted = sessions(VotePolicy(max_runs=5))
-    single = sessions(VotePolicy(max_runs=1))
-    # measured over 200 seeds: 88 % of voted sessions bracket the truth, 28 % of one-run ones
-    assert sum(f is not None and p is not None and f < 14.3 <= p for f, p, _ in voted) >= 16
-    assert sum(f is not None and p is not None and f < 14.3 <= p for f, p, _ in single) <= 9
-    runs_voted, runs_single = sum(r for *_, r in voted), sum(r for *_, r in single)
-    assert runs_voted < 5 * runs_single  # the price: about 3 runs per trial
-
-
-def test_vote_policy_stops_at_the_lead_or_the_cap() -> None:
-    policy = VotePolicy(max_runs=5)
-    assert policy.more(1, 0) and not policy.more(2, 0) and policy.more(2, 1) and not policy.more(3, 1)
-    assert not policy.more(3, 2)  # 5 runs: the cap
-    assert policy.more(2, 0, confirming=True) and not policy.more(3, 0, confirming=True) and not policy.more(4, 3, confirming=True)
-    assert not VotePolicy(max_runs=1).more(1, 0) and not VotePolicy(max_runs=1).noisy
+def test_run_policy_is_noisy_above_one_run_per_trial() -> None:
+    # runs given decide; not given: 1 for a deterministic system, NOISY_RUNS for a noisy one
+    steady, noisy = FakeSlam(), FakeSlam(flaky=0.3)
+    assert not RunPolicy.for_system(steady, None).noisy and RunPolicy.for_system(noisy, None).max_runs == NOISY_RUNS
+    assert RunPolicy.for_system(steady, 3).noisy and RunPolicy.for_system(steady, 3).max_runs == 3
+    assert not RunPolicy.for_system(noisy, 1).noisy and not RunPolicy().noisy
 
 
 # -- the requirement language ------------------------------------------------------------------

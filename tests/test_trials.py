@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from pytest_sal import tracking_rate
+from pytest_sal.engine.outcome import Trial
 from pytest_sal.engine.requirements import Requirement
 from pytest_sal.engine.run_job import cached_sequence
 from pytest_sal.engine.trial_runner import TrialRunner, aggregate_metrics
@@ -39,6 +40,7 @@ def test_a_trial_is_judged_and_read_back_from_the_cache(tmp_path: Path) -> None:
     calls = tmp_path / "calls.jsonl"
     first = runner(tmp_path, FakeSlam(calls_file=str(calls))).evaluate(20.0)
     assert first.metrics["tracking_rate"] == 0.5 and first.passed and not first.cached  # round(8 * 20/40) = 4 of 8
+    assert len(first.runs) == 1  # a deterministic system: one run a trial
     again = runner(tmp_path, FakeSlam(calls_file=str(calls))).evaluate(20.0)
     assert again.cached and again.metrics == first.metrics
     assert len(calls.read_text().splitlines()) == 1  # one SLAM run for both
@@ -69,26 +71,25 @@ def test_cache_frames_gives_systems_the_stored_copy(tmp_path: Path) -> None:
     assert ContentCache(tmp_path / "cache").stats()["folders"] == 1
 
 
-def test_a_noisy_system_votes_until_one_verdict_leads_by_two(tmp_path: Path) -> None:
+def test_a_noisy_systems_runs_are_added_one_by_one_and_read_back(tmp_path: Path) -> None:
     # the flaky fake alternates 0.5 and 0.5 + 0.3 tracked at 20 m: against tracking_rate >= 0.6
-    # its runs vote fail, pass, fail, pass, ... and never lead by 2: the trial spends its 5 runs
+    # its runs fail, pass, fail, pass, ...; the trial's verdict is their majority
     calls = tmp_path / "calls.jsonl"
     noisy = runner(tmp_path, FakeSlam(flaky=0.3, calls_file=str(calls)))
     noisy.requirement = Requirement.build([tracking_rate >= 0.6, fog.visibility_m >= 25])
-    trial = noisy.evaluate(20.0)
-    assert [r["passed"] for r in trial.runs] == [False, True, False, True, False] and not trial.passed
-    assert trial.votes() == "3 of 5 runs failed" and not noisy.settled(trial)
-    # the same fake at 40 m tracks everything in every run: 2 runs settle it
-    steady = noisy.evaluate(40.0)
-    assert len(steady.runs) == 2 and steady.passed and noisy.settled(steady)
-    # confirming asks for a lead of 3: one more run (each run is its own cache entry)
-    assert noisy.confirm(steady) and len(steady.runs) == 3
+    assert noisy.policy.noisy and noisy.policy.max_runs == 5
+    trial = Trial(value=20.0, passed=False)
+    added = [run for _ in range(5) for run in noisy.add_runs(trial, 1)]  # one at a time: the fake alternates by its run count
+    assert [r["passed"] for r in added] == [r["passed"] for r in trial.runs] == [False, True, False, True, False]
+    assert not trial.passed and trial.votes() == "3 of 5 runs failed" and not trial.cached
+    # each run is its own cache entry: another session reads all five back, together
     again = runner(tmp_path, FakeSlam(flaky=0.3, calls_file=str(calls)))
     again.requirement = noisy.requirement
     before = len(calls.read_text().splitlines())
-    reread = again.evaluate(40.0)
-    again.confirm(reread)
-    assert reread.cached and len(reread.runs) == 3 and len(calls.read_text().splitlines()) == before
+    reread = Trial(value=20.0, passed=False)
+    again.add_runs(reread, 5)
+    assert reread.cached and [r["passed"] for r in reread.runs] == [False, True, False, True, False]
+    assert len(calls.read_text().splitlines()) == before
 
 
 def test_a_starved_run_does_not_vote_against_the_system(tmp_path: Path) -> None:
@@ -106,8 +107,9 @@ def test_a_starved_run_does_not_vote_against_the_system(tmp_path: Path) -> None:
             return result
 
     starved = runner(tmp_path, Starved(tracked="1"))
-    starved.policy = type(starved.policy)(max_runs=5)
-    trial = starved.evaluate(40.0)
+    trial = Trial(value=40.0, passed=False)
+    for _ in range(4):  # one at a time: the fake starves every other run by its run count
+        starved.add_runs(trial, 1)
     assert [r["abstained"] for r in trial.runs] == [True, False, True, False]  # runs 1 and 3 were starved
     assert trial.passed and trial.passes == 2 and trial.fails == 0 and trial.abstained == 2
     assert trial.votes() == "2 of 2 runs passed (2 starved by the machine, not counted)"

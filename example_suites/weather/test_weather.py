@@ -52,8 +52,4 @@ def test_snow(sal_outcome):
     """Heavy snowfall (10 mm/h water equivalent) without degradation. When the most severe
     value of the range passes too, the boundary reads ``> 30 mm/h (never failed)`` and the
     search stops after two trials.
-
-    ``tracking_rate >= 0.9`` rather than 0.95: a metric within 10 % of its threshold at the
-    envelope's edge gets the edge trial run again to catch a flaky verdict, and a perfect 1.0
-    is within 10 % of 0.95, so 0.95 costs a repeat in every search that tracks everything.
     """

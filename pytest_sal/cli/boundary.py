@@ -59,7 +59,9 @@ def add_boundary_commands(commands: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     cmd.add_argument("config", type=Path, metavar="CONFIG", help="experiment YAML with an enabled robustness_boundary block")
-    add_slam_arguments(cmd, "the most runs per trial; runs vote until one verdict leads by 2, metrics are their median", default_runs=None)
+    add_slam_arguments(
+        cmd, "the most runs per trial; above 1 the system is searched as a noisy one (its chance to hold)", default_runs=None
+    )
     add_cache_arguments(cmd, "trial cache", no_cache="run every trial, read and store nothing in the cache")
     add_executor_arguments(cmd)
     cmd.set_defaults(run=_run)
@@ -109,7 +111,7 @@ def _print_setup(search: BoundarySearch) -> None:
 
 def _step_printer(search: BoundarySearch) -> Callable[[Trial], None]:
     """A ``TrialRunner.progress`` callback printing ``step N`` and the trial's line as each
-    trial ends (again when a confirmation adds runs to it)."""
+    trial ends (again when runs are added to it)."""
     from pytest_sal.report.formatting import trial_line
     from pytest_sal.report.outcome_report import trial_metric_names
 

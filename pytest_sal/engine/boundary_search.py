@@ -15,11 +15,8 @@ scale, and on a linear one when both ends are positive and a decade or more apar
 relative (``rel_tolerance``: the bracket's width over its larger end), which suits a parameter
 searched over decades (bandwidth 0.01..200 Mbit/s) as well as a linear one.
 
-Noisy systems. A ``Judge`` may stand behind ``evaluate``: each trial is then a vote of runs
-(see ``pytest_sal.votes``). The search asks it to ``confirm`` the edge and, at the end, both
-ends of the bracket (or the far end, when it agrees with the edge) with a stronger lead of votes. When a confirmation turns an end's verdict,
-the bracket is rebuilt from every trial and bisection goes on while the budget lasts. An edge
-whose runs never settled on a verdict makes the result ``flaky``.
+Every verdict is final: the search is for deterministic systems (one run per trial). A noisy
+system's boundary is a curve of its chance to hold (``pytest_sal.engine.reliability_search``).
 
 A previous boundary ``warm_start`` is tried right after the edge: when it still brackets within
 tolerance, an unchanged system needs three trials. Every trial is checked against the order: a
@@ -27,9 +24,8 @@ pass more severe than a fail contradicts monotonicity and is reported.
 
 Free workers. ``width`` says before each round how many trials a round may hold now (free
 workers over the runs a trial needs). A round is one evaluation of several values at once, each
-in its own thread (``evaluate`` and ``Judge.confirm`` must then be safe to call from several
-threads for distinct values), or one confirmation. The edge goes alone; the warm-start hints
-go together; then the far end; the final confirmation of both ends is one round. Bisection
+in its own thread (``evaluate`` must then be safe to call from several threads for distinct
+values). The edge goes alone; the warm-start hints go together; then the far end. Bisection
 speculates: with ``k`` trials free it evaluates the first ``k`` nodes, breadth-first, of the
 bisection tree below the bracket (``k = 3``: the midpoint and both quarter points, the 4-ary
 search; ``k = 7``: the 8-ary search). A node exists only where the sequential search would
@@ -54,8 +50,7 @@ the walk turned away from, outside the bracket the walk ends in, and a trial out
 moves neither end (``_Search.bracket`` takes only a pass or a fail strictly between them): for
 any deterministic system, a monotone one included, off-path trials never move the bracket, and
 interval, termination and verdict are those of the sequential search. They add to
-``contradictions`` only where the system is not monotone. When a confirmation turns a verdict,
-the bracket is rebuilt from every trial, off-path ones included.
+``contradictions`` only where the system is not monotone.
 """
 
 from __future__ import annotations
@@ -64,9 +59,9 @@ import math
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from typing import Any, Literal, Protocol, TypeVar
+from typing import Any, Literal, TypeVar
 
-__all__ = ["TERMINATIONS", "Judge", "SearchResult", "SearchSpace", "TrialPoint", "boundary_search"]
+__all__ = ["TERMINATIONS", "SearchResult", "SearchSpace", "TrialPoint", "boundary_search"]
 
 #: Why a search stopped.
 TERMINATIONS = ("tolerance", "max_trials", "not_bracketed", "domain_resolution")
@@ -119,18 +114,6 @@ class TrialPoint:
     speculative: bool = False
 
 
-class Judge(Protocol):
-    """Verdict strength of a noisy system's trials (``info`` is the evaluator's trial)."""
-
-    def confirm(self, info: Any) -> bool:
-        """Run more of ``info``'s trial until its verdict is confirmed; the verdict now."""
-        ...
-
-    def settled(self, info: Any) -> bool:
-        """The trial's runs agree enough to call its verdict (not a real disagreement)."""
-        ...
-
-
 @dataclass
 class SearchResult:
     """What the search found.
@@ -142,8 +125,7 @@ class SearchResult:
         termination: one of ``TERMINATIONS``.
         trials: every evaluation: each round's path trials in order, then its speculative ones.
         contradictions: trials that contradict monotonicity, in words.
-        flaky: the edge's runs disagreed and never settled on a verdict.
-        rounds: evaluation rounds and confirmation rounds (one at a time: trials plus confirmations).
+        rounds: evaluation rounds (one at a time: as many as trials).
     """
 
     edge_passed: bool
@@ -152,7 +134,6 @@ class SearchResult:
     termination: str
     trials: list[TrialPoint] = field(default_factory=list)
     contradictions: list[str] = field(default_factory=list)
-    flaky: bool = False
     rounds: int = 0
 
     @property
@@ -168,7 +149,6 @@ def boundary_search(
     tolerance: float | None = None,
     max_trials: int = 8,
     warm_start: tuple[float | None, float | None] | None = None,
-    judge: Judge | None = None,
     rel_tolerance: float | None = None,
     width: Callable[[], int] | None = None,
     cached: Callable[[float], bool] | None = None,
@@ -182,23 +162,18 @@ def boundary_search(
         tolerance: stop when ``|pass_value - fail_value| <= tolerance`` (the parameter's unit).
         max_trials: at most this many evaluations on the search path, the edge included.
         warm_start: a previous ``(pass_value, fail_value)`` tried first after the edge.
-        judge: confirms verdicts of a noisy system (``None``: every verdict is final).
         rel_tolerance: stop when the bracket's width is at most this share of its larger end.
         width: how many trials a round may hold now, asked before each round (``None``: 1,
-            the sequential search); above 1, ``evaluate`` and ``judge.confirm`` are called
-            from several threads at once, for distinct trials.
+            the sequential search); above 1, ``evaluate`` is called from several threads at
+            once, for distinct values.
         cached: whether a trial at a value would be read back from a cache (it costs no run):
             a bisection step whose midpoint is cached goes alone, without speculative trials
             beside it, so a search that is cached along its path sends no new run.
     """
     if tolerance is None and rel_tolerance is None:
         raise ValueError("boundary_search needs tolerance or rel_tolerance")
-    search = _Search(evaluate, space, max_trials, judge, width or (lambda: 1), tolerance, rel_tolerance, cached or (lambda value: False))
+    search = _Search(evaluate, space, max_trials, width or (lambda: 1), tolerance, rel_tolerance, cached or (lambda value: False))
     (first,) = search.run([edge])
-    flaky = False
-    if judge is not None:
-        search.confirm([first])
-        flaky = not judge.settled(first.info)
     edge_passed = first.passed
     far = space.severe if edge_passed else space.mild
 
@@ -207,23 +182,15 @@ def boundary_search(
 
     passing, failing = search.bracket()
     unbracketed = (passing is None or failing is None) and not search.spent and all(t.value != far for t in search.trials)
-    if unbracketed and search.run([far])[0].passed == edge_passed and judge is not None:  # "never failed/passed" is a claim to confirm
-        search.confirm(search.trials[-1:])
-    while True:
-        passing, failing = search.bracket()
-        if passing is None or failing is None:
-            termination = "not_bracketed" if any(t.value == far for t in search.trials) else "max_trials"
-            break
-        termination = search.bisect()
-        if judge is None or not search.confirm_ends():
-            break
-        if search.spent:  # an end turned, and no budget is left to search the new bracket
-            termination = "max_trials"
-            break
+    if unbracketed:
+        search.run([far])
     passing, failing = search.bracket()
-    return SearchResult(
-        first.passed, passing, failing, termination, search.trials, _contradictions(search.trials, space), flaky, search.rounds
-    )
+    if passing is None or failing is None:
+        termination = "not_bracketed" if any(t.value == far for t in search.trials) else "max_trials"
+    else:
+        termination = search.bisect()
+    passing, failing = search.bracket()
+    return SearchResult(first.passed, passing, failing, termination, search.trials, _contradictions(search.trials, space), search.rounds)
 
 
 @dataclass(frozen=True)
@@ -252,7 +219,6 @@ class _Search:
         evaluate: Callable[[float], tuple[bool, Any]],
         space: SearchSpace,
         max_trials: int,
-        judge: Judge | None,
         width: Callable[[], int],
         tolerance: float | None,
         rel_tolerance: float | None,
@@ -261,7 +227,6 @@ class _Search:
         self.evaluate = evaluate
         self.space = space
         self.max_trials = max_trials
-        self.judge = judge
         self.width = width
         self.tolerance = tolerance
         self.rel_tolerance = rel_tolerance
@@ -282,10 +247,6 @@ class _Search:
         points = self._in_rounds(self._point, values)
         self.trials += points
         return points
-
-    def confirm(self, trials: list[TrialPoint]) -> None:
-        """Let the judge confirm ``trials``, ``width()`` of them a round; turned verdicts show in ``passed``."""
-        self._in_rounds(self._confirm_one, trials)
 
     def bracket(self) -> tuple[float | None, float | None]:
         """The most severe pass that is milder than every fail seen so far, and the mildest
@@ -318,13 +279,6 @@ class _Search:
             for point in reached.values():
                 point.speculative = True
                 self.trials.append(point)
-
-    def confirm_ends(self) -> bool:
-        """Confirm the trials at both ends of the bracket; ``True`` when a verdict turned."""
-        ends = [next(t for t in reversed(self.trials) if t.value == value) for value in self.bracket()]
-        before = [t.passed for t in ends]
-        self.confirm(ends)
-        return [t.passed for t in ends] != before
 
     def _stop(self, passing: float, failing: float, ahead: int = 0) -> str | None:
         """Why the sequential search would stop at this bracket, ``ahead`` path trials from now
@@ -361,10 +315,6 @@ class _Search:
     def _point(self, value: float) -> TrialPoint:
         passed, info = self.evaluate(value)
         return TrialPoint(value, bool(passed), info)
-
-    def _confirm_one(self, trial: TrialPoint) -> None:
-        assert self.judge is not None
-        trial.passed = bool(self.judge.confirm(trial.info))
 
     def _in_rounds(self, work: Callable[[_Item], _Done], items: Sequence[_Item]) -> list[_Done]:
         """``work`` on each item, ``width()`` items a round."""

@@ -1,7 +1,7 @@
 """Where runs happen: the executor seam.
 
 A ``TrialRunner`` hands every run that is not in the cache to an ``Executor`` as a ``RunJob``
-and gets a ``RunOutput`` back; the cache, the vote, the search and the history stay on the
+and gets a ``RunOutput`` back; the cache, the verdicts, the search and the history stay on the
 controller (the pytest session), so results of every executor are interchangeable and a cached
 run is never sent anywhere.
 

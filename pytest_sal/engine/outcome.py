@@ -383,8 +383,7 @@ class Outcome:
         """The trial at ``value`` (``None`` when none was tried there, or ``value`` is
         ``None``). The rule: equal within float rounding (``math.isclose``, relative 1e-9,
         absolute 1e-12: a value converted from an older unit or through JSON still finds its
-        trial), and of several trials at that value the last, the latest evidence (the one
-        the search confirmed with more runs)."""
+        trial), and of several trials at that value the last, the latest evidence."""
         if value is None:
             return None
         return next((t for t in reversed(self.trials) if math.isclose(t.value, value, rel_tol=1e-9, abs_tol=1e-12)), None)

@@ -51,9 +51,9 @@ def search_space(ref: ParamRef, search_range: tuple[float, float] | None = None)
 
 def search_width(runner: TrialRunner) -> int:
     """How many trials a round of the search may hold now: the runs ``runner``'s executor can
-    take at once over the runs a trial's first vote needs (1 for a deterministic system, the
-    lead for a noisy one); at least 1 (``local``: always 1, the sequential search)."""
-    return max(1, runner.executor.slots(runner.system) // runner.policy.needed(0, 0))
+    take at once (a deterministic system's trial is one run); at least 1 (``local``: always 1,
+    the sequential search)."""
+    return max(1, runner.executor.slots(runner.system))
 
 
 def run_search(
@@ -62,9 +62,9 @@ def run_search(
     settings: SearchSettings,
     warm_start: tuple[float | None, float | None] | None = None,
 ) -> SearchResult:
-    """The boundary search of ``requirement`` with ``runner``: a round's trials are evaluated
-    and confirmed in threads, as many as ``search_width`` allows; a trial left off the search
-    path is marked ``Trial.speculative``."""
+    """The boundary search of ``requirement`` with ``runner`` (a deterministic system: one run
+    a trial, every verdict final): a round's trials are evaluated in threads, as many as
+    ``search_width`` allows; a trial left off the search path is marked ``Trial.speculative``."""
     envelope = requirement.envelope
     assert envelope is not None
     space = search_space(envelope.ref, requirement.options.get("search_range"))
@@ -77,7 +77,6 @@ def run_search(
         trial = runner.evaluate(value)
         return trial.passed, trial
 
-    judge = runner if runner.policy.noisy else None  # one run per trial: every verdict is final
     result = boundary_search(
         evaluate,
         space,
@@ -85,7 +84,6 @@ def run_search(
         tolerance,
         max_trials,
         warm_start,
-        judge=judge,
         rel_tolerance=rel_tolerance,
         width=functools.partial(search_width, runner),
         cached=runner.cached,
@@ -122,7 +120,7 @@ def search_outcome(
     if runner.policy.noisy:
         return _noisy_outcome(runner, requirement, settings, test_id, requirement.envelope.value, earlier=earlier)  # type: ignore[union-attr]
     result = run_search(runner, requirement, settings, warm_start)
-    verdict = "flaky" if result.flaky else "passed" if result.edge_passed else "failed"
+    verdict = "passed" if result.edge_passed else "failed"
     boundary = Boundary(result.pass_value, result.fail_value, runner.ref.unit)
     trials = [point.info for point in result.trials]
     return _outcome(runner, requirement, test_id, verdict, boundary, result.termination, trials, result.contradictions)
@@ -142,7 +140,6 @@ def single_outcome(
     if runner.policy.noisy:
         return _noisy_outcome(runner, requirement, settings or SearchSettings(), test_id, value, single=True, earlier=earlier)
     trial = runner.evaluate(value)
-    runner.confirm(trial)
     boundary = Boundary(value if trial.passed else None, None if trial.passed else value, runner.ref.unit)
     return _outcome(runner, requirement, test_id, "passed" if trial.passed else "failed", boundary, "single", [trial], [])
 
@@ -247,9 +244,10 @@ def _metrics_text(metrics: dict[str, Any], judged: tuple[str, ...] = ()) -> str:
 
 
 def failure_message(outcome: Outcome) -> str:
-    """What a failed (or flaky, or inconclusive) robustness test says: the requirement, where
-    it failed, the boundary, the metrics at both ends (a noisy system's: how sure the verdict
-    is and why runs failed at each severity) and a one-line reproduction."""
+    """What a failed (or inconclusive) robustness test says: the requirement, where it failed,
+    the boundary, the metrics at both ends (a noisy system's: how sure the verdict is and why
+    runs failed at each severity) and a one-line reproduction. An outcome read from history
+    written before may be ``flaky`` (a vote of runs that disagreed at the edge)."""
     if outcome.boundary.noisy:
         from pytest_sal.engine.reliability_outcome import reliability_message
 
@@ -262,11 +260,8 @@ def failure_message(outcome: Outcome) -> str:
     first = outcome.trials[0]
     judged = tuple(name for name, _, _ in outcome.criteria)
     lines = []
-    if outcome.verdict == "flaky":
-        lines.append(
-            f"FLAKY: {outcome.requirement}: at the edge {outcome.parameter} = {first.value:g}{unit} the runs disagree "
-            f"({first.passes} passed, {first.fails} failed): the edge sits on the system's failure boundary"
-        )
+    if outcome.verdict == "flaky":  # history written before: a vote of runs at the edge that disagreed
+        lines.append(f"FLAKY: {outcome.requirement}: at {outcome.parameter} = {first.value:g}{unit} the runs disagreed ({first.votes()})")
     elif outcome.verdict == "passed":  # failed by a --sal-compare-fail check only
         lines.append(f"regressed against the history (the requirement is met): {outcome.requirement}")
         lines.append(f"  at {outcome.parameter} = {first.value:g}{unit}: {_metrics_text(first.metrics, judged)}{_stopped_text(first)}")

@@ -1,12 +1,12 @@
 """One trial: perturb the dataset at one severity, run the system, score each run with evo,
-and judge the requirement by a vote of runs. Runs are cached content-addressed, one by one.
+and judge the requirement by its runs. Runs are cached content-addressed, one by one.
 
-A deterministic system (``reference_vo``) gets one run per trial. A noisy one (ORB-SLAM3 is
-multi-threaded and uses RANSAC: about one run in six splits its map on a clean 51-frame KITTI
-sequence) gets a sequential vote (``VotePolicy``): runs are added until one verdict leads by
-``lead`` runs or ``max_runs`` are spent, so one unlucky run never decides a bisection step. The
-search asks for a stronger lead (``confirm_lead``) at the envelope's edge and at the final
-bracket's ends. A trial's metrics are the median over its runs; its verdict is the majority.
+A deterministic system (``reference_vo``) gets one run per trial (``evaluate``), and the
+boundary search bisects on its verdicts. A noisy one (ORB-SLAM3 is multi-threaded and uses
+RANSAC: about one run in six splits its map on a clean 51-frame KITTI sequence) is searched by
+``pytest_sal.engine.reliability_search``, which places its runs with ``add_runs``
+(``RunPolicy``: whether a system is noisy). A trial's metrics are the median over its runs; its
+verdict is the majority of the runs that did not abstain.
 
 The cache key of a run holds everything that changes its result: the dataset fingerprint, the
 configured module (name, version, every parameter), the seed, the system's identity (name,
@@ -59,8 +59,8 @@ from sal_wrappers import SlamSystem
 __all__ = [
     "NOISY_RUNS",
     "RUNNER_VERSION",
+    "RunPolicy",
     "TrialRunner",
-    "VotePolicy",
     "aggregate_metrics",
     "run_record_problem",
 ]
@@ -109,23 +109,18 @@ def run_record_problem(record: dict[str, Any]) -> str | None:
 
 
 @dataclass(frozen=True)
-class VotePolicy:
-    """How many runs decide a trial of a noisy system.
+class RunPolicy:
+    """Whether a system is noisy, and the most runs per trial it is given.
 
     Attributes:
-        max_runs: at most this many runs per trial (1: every verdict rests on one run).
-        lead: a trial's verdict stands once passes and fails differ by this many runs.
-        confirm_lead: the lead the envelope's edge and the final bracket's ends need.
-        confirm_runs: at most this many runs when confirming (default ``max_runs + 2``).
+        max_runs: the most runs per trial (1: a deterministic system, one run a trial; above
+            1: a noisy one, searched by ``pytest_sal.engine.reliability_search``).
     """
 
     max_runs: int = 1
-    lead: int = 2
-    confirm_lead: int = 3
-    confirm_runs: int | None = None
 
     @classmethod
-    def for_system(cls, system: SlamSystem, runs: int | None) -> VotePolicy:
+    def for_system(cls, system: SlamSystem, runs: int | None) -> RunPolicy:
         """``runs`` when given (the most runs per trial), else 1 for a deterministic system
         and ``NOISY_RUNS`` for a noisy one."""
         if runs is None:
@@ -134,26 +129,9 @@ class VotePolicy:
 
     @property
     def noisy(self) -> bool:
+        """More than one run per trial: ``runs`` given above 1, or a system that is not
+        ``deterministic`` with ``runs`` not given."""
         return self.max_runs > 1
-
-    def more(self, passes: int, fails: int, confirming: bool = False, abstained: int = 0) -> bool:
-        """Another run is needed: the lead is short (or no run voted) and runs are left; runs
-        that abstained (starved by the machine) count against the cap."""
-        lead, cap = self._limits(confirming)
-        short = abs(passes - fails) < lead if self.noisy else passes + fails == 0
-        return short and passes + fails + abstained < cap
-
-    def _limits(self, confirming: bool) -> tuple[int, int]:
-        """The lead a verdict needs and the most runs: ``confirm_lead`` / ``confirm_runs`` when confirming."""
-        return (self.confirm_lead, self.confirm_runs or self.max_runs + 2) if confirming else (self.lead, self.max_runs)
-
-    def needed(self, passes: int, fails: int, confirming: bool = False, abstained: int = 0) -> int:
-        """The fewest more runs after which the vote could be settled (at least 1 while
-        ``more``): running that many at once gives the verdict the runs one by one would, since
-        each run moves the lead by at most one."""
-        lead, cap = self._limits(confirming)
-        short = lead - abs(passes - fails) if self.noisy else 1
-        return max(1, min(short, cap - passes - fails - abstained))
 
 
 #: Most runs per trial of a noisy system when ``sal_runs`` is not set.
@@ -170,7 +148,7 @@ class TrialRunner:
         system: the SLAM system under test.
         requirement: judges each run's metrics.
         runs: the most runs per trial (``None``: 1 for a deterministic system, else
-            ``NOISY_RUNS``); see ``VotePolicy``.
+            ``NOISY_RUNS``); above 1 the system is noisy (``RunPolicy``).
         seed: perturbation seed (the same random pattern at every severity).
         cache: the run cache, or ``None`` to always run.
         workdir: where runs write their logs and files.
@@ -181,11 +159,11 @@ class TrialRunner:
             layout, and give systems the copy read back from there: the same severity is then
             perturbed once for every system and session (worth it for several systems or an
             external ``command`` system; writing costs about 25-45 ms a frame).
-        progress: called with the trial after each evaluation and confirmation (from one
-            thread at a time).
+        progress: called with the trial each time runs are added to it (from one thread at
+            a time).
         kitti_segments: segment lengths (m) of ``t_rel`` / ``r_rel`` (ini ``sal_kitti_segments``).
         executor: where runs that are not cached happen (``LocalExecutor``: here, one at a
-            time); runs of one vote go to it together, up to ``executor.slots(system)``.
+            time); the runs of one ``add_runs`` go to it together.
         early_stop: stop a run of a ``stoppable`` system once the requirement can no longer
             hold (``StopRule``; see the module text); ``False``: every run runs every frame.
     """
@@ -207,7 +185,7 @@ class TrialRunner:
     early_stop: bool = True
 
     def __post_init__(self) -> None:
-        self.policy = VotePolicy.for_system(self.system, self.runs)
+        self.policy = RunPolicy.for_system(self.system, self.runs)
         self._progress_lock = threading.Lock()
         stoppable = self.early_stop and self.system.stoppable
         #: what stops this requirement's runs early (``None``: they run every frame)
@@ -252,32 +230,16 @@ class TrialRunner:
         return self.run_cached(value, 0)
 
     def evaluate(self, value: float) -> Trial:
-        """The trial at ``value``: runs until the vote's lead settles (``VotePolicy.lead``)."""
+        """The trial at ``value`` of a deterministic system: one run."""
         trial = Trial(value=float(value), passed=False)
-        self._extend(trial, confirming=False)
+        self._extend(trial)
         return trial
 
-    # -- the Judge of pytest_sal.engine.boundary_search (its trials' info is the Trial) ------------------------------
-    def confirm(self, trial: Trial) -> bool:
-        """More runs of ``trial`` until its verdict leads by ``confirm_lead``; its verdict."""
-        if self.policy.noisy:
-            self._extend(trial, confirming=True)
-        return trial.passed
-
-    def settled(self, trial: Trial) -> bool:
-        """The runs of ``trial`` agree by at least ``lead`` (always, with one run per trial)."""
-        return not self.policy.noisy or abs(trial.passes - trial.fails) >= self.policy.lead
-
-    def _extend(self, trial: Trial, confirming: bool) -> None:
-        start = time.perf_counter()
-        added = False
-        while not trial.runs or self.policy.more(trial.passes, trial.fails, confirming, abstained=trial.abstained):
-            batch = min(
-                self.policy.needed(trial.passes, trial.fails, confirming, trial.abstained), max(1, self.executor.slots(self.system))
-            )
-            self._append_runs(trial, batch)
-            added = True
-        if added:
+    def _extend(self, trial: Trial) -> None:
+        """The first run of ``trial`` when it has none (a trial read back without its runs)."""
+        if not trial.runs:
+            start = time.perf_counter()
+            self._append_runs(trial, 1)
             self._summarise(trial, time.perf_counter() - start)
 
     def add_runs(self, trial: Trial, count: int) -> list[dict[str, Any]]:
@@ -308,7 +270,7 @@ class TrialRunner:
                 results = list(pool.map(functools.partial(self._cached_run, trial.value), numbers))
         for data, cached in results:
             passed = self.requirement.holds(data["metrics"])
-            # a run the machine starved is no evidence that the system failed: it gets no vote
+            # a run the machine starved is no evidence that the system failed: it abstains
             run = dict(data["metrics"], passed=passed, abstained=bool(data["metrics"].get("starved")) and not passed, cached=cached)
             if reason := _not_cached(data):
                 run["not_cached"] = reason

@@ -101,7 +101,7 @@ class BoundarySearch:
         ref: the searched parameter; ``requirement`` what each trial is judged by.
         clean: the clean sequence.
         folder: where the summary, the plot and the runs' files go.
-        max_runs: the most runs per trial (``VotePolicy``).
+        max_runs: the most runs per trial (``RunPolicy``: above 1, the system is noisy).
         runs, timeout, cache: as ``TrialRunner`` takes them (runs per trial, seconds per run,
             the trial cache or ``None``).
     """
@@ -149,7 +149,7 @@ def prepare_boundary_search(
     ``NOISY_RUNS``; ``timeout``: seconds per run; the trial cache at ``cache_dir``, default
     ``.sal/cache``, unless ``use_cache`` is false)."""
     from pytest_sal.engine.requirements import Requirement, ate_rmse, tracking_rate
-    from pytest_sal.engine.trial_runner import VotePolicy
+    from pytest_sal.engine.trial_runner import RunPolicy
     from pytest_sal.store.trial_cache import command_cache
 
     rb = enabled_boundary(config)
@@ -171,7 +171,7 @@ def prepare_boundary_search(
     clean = build_sequence(config)
     folder = config.output_dir() / "robustness_boundary" / system.name / rb.name
     cache = command_cache(cache_dir) if use_cache else None
-    max_runs = VotePolicy.for_system(system, runs).max_runs
+    max_runs = RunPolicy.for_system(system, runs).max_runs
     return BoundarySearch(config, rb, system, ref, requirement, clean, folder, max_runs, runs, timeout, cache)
 
 
@@ -182,8 +182,8 @@ def run_boundary_search(
     plot: Callable[[Outcome, Path], object] | None = None,
     executor: Executor | None = None,
 ) -> BoundaryResult:
-    """Run ``search`` (``on_trial``: called with each trial as it ends, again when a
-    confirmation adds runs to it) and write its summary and, with ``plot`` (a function drawing
+    """Run ``search`` (``on_trial``: called with each trial as it ends, again when runs are
+    added to it) and write its summary and, with ``plot`` (a function drawing
     an outcome as a PNG at a path), ``boundary_plot.png``; both replace the previous ones together.
     ``executor``: where the runs happen (``None``: here, one at a time)."""
     from pytest_sal.analysis.kitti_metrics import KITTI_SEGMENTS_M
