@@ -16,7 +16,7 @@ import pytest
 from ray_clusters import listening_addresses, ray_environment, session_processes, wait_until_gone
 
 from pytest_sal import tracking_rate
-from pytest_sal.engine.executor import Executor, LocalExecutor
+from pytest_sal.engine.executor import Executor
 from pytest_sal.engine.outcome import Outcome, Trial
 from pytest_sal.engine.ray_executor import RayExecutor
 from pytest_sal.engine.requirement_runner import SearchSettings, search_outcome
@@ -24,6 +24,7 @@ from pytest_sal.engine.requirements import Requirement
 from pytest_sal.engine.run_job import RunJob, RunOutput
 from pytest_sal.engine.trial_runner import TrialRunner
 from pytest_sal.store.trial_cache import ContentCache
+from pytest_sal.testing import InProcessSlots
 from sal_adapters import open_dataset
 from sal_modules import fog
 from sal_wrappers import SlamSystem, create
@@ -111,7 +112,7 @@ def test_the_search_on_two_nodes_gives_the_local_outcome(two_nodes: TwoNodes, tm
     assert executor.slots(create("reference_vo")) == 1  # not connected yet: a joined cluster's size is unknown
     on_ray = search(executor, tmp_path / "ray")
     assert executor.describe() == f"ray at {two_nodes.cluster.address}: 2 nodes, 2 CPUs, 0 GPUs"
-    local = search(LocalExecutor(), tmp_path / "local")
+    local = search(InProcessSlots(2), tmp_path / "local")  # the same two slots, here: the same placement of runs
     assert trials(on_ray) == trials(local) and on_ray.boundary == local.boundary and on_ray.verdict == local.verdict
     assert executor.submitted == sum(len(t.runs) for t in on_ray.trials) > len(on_ray.trials)  # several runs a trial
 

@@ -138,8 +138,9 @@ class Trial:
     def failure_summary(self) -> str:
         """The runs that held and why the others failed, grouped by kind: ``4 of 6 runs held;
         2 initialised late (first pose at frame 28-33)``. Kinds: the run failed (its reason),
-        initialised late (first pose at frame 5 or later), stopped early (why), else lost
-        tracking or a large ATE (the ranges of the runs' values)."""
+        initialised late, stopped early (the first one's reason), else lost
+        tracking or a large ATE (the ranges of the runs' values). Late: the first pose at frame
+        10 or later, or a tenth of the frames."""
         failed = [r for r in self.runs if not r.get("passed") and not r.get("abstained")]
         text = f"{self.passes} of {self.voting} run{'s' if self.voting != 1 else ''} held"
         if self.abstained:
@@ -153,6 +154,8 @@ class Trial:
                 parts.append(f"{len(runs)} initialised late (first pose at frame {_span([r['first_tracked'] for r in runs], 'g')})")
             elif kind == "tracking":
                 parts.append(f"{len(runs)} lost tracking (tracking rate {_span([r.get('tracking_rate') for r in runs], '.2f')})")
+            elif kind == "stopped":
+                parts.append(f"{len(runs)} stopped early ({str(runs[0]['stopped']).strip()[:100]})")
             elif kind == "ate":
                 parts.append(f"{len(runs)} drifted (ATE {_span([r.get('ate_rmse') for r in runs], '.3g')} m)")
             else:
@@ -285,11 +288,12 @@ def _failure_kind(run: dict[str, Any]) -> str:
     """What kind of failure a failed run shows (``Trial.failure_summary``)."""
     if run.get("failure"):
         return f"failed: {str(run['failure']).split(';')[0][:80]}"
-    first = run.get("first_tracked")
-    if isinstance(first, (int, float)) and first >= 5:
+    first, frames = run.get("first_tracked"), run.get("frames")
+    late_from = max(10, 0.1 * frames) if isinstance(frames, (int, float)) else 10
+    if isinstance(first, (int, float)) and first >= late_from:
         return "late"
     if run.get("stopped"):
-        return f"stopped early: {str(run['stopped'])[:80]}"
+        return "stopped"
     rate = run.get("tracking_rate")
     return "tracking" if isinstance(rate, (int, float)) and rate < 0.95 else "ate"
 

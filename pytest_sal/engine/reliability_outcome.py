@@ -196,7 +196,7 @@ def reliability_message(outcome: Outcome) -> list[str]:
             else "p at the edge sits on the required reliability, so more runs may not settle it"
         )
         lines.append(
-            f"INCONCLUSIVE: {outcome.requirement}: after {b.runs} runs, the chance that a run holds it at {outcome.parameter} = {edge} "
+            f"INCONCLUSIVE: {outcome.requirement}: after {b.runs} run{'s' if b.runs != 1 else ''}, the chance that a run holds it at {outcome.parameter} = {edge} "
             f"is at least {share} with confidence {100 * holds:.3g} %, not {sure}, nor below it with that confidence; {settle}"
         )
     elif outcome.verdict == "failed":

@@ -4,8 +4,8 @@ knows::
 
     {"outcome": {...Outcome.to_dict()...},
      "experiment": {"config", "name", "boundary", "target_perturbation", "module",
-                    "lower_bound", "upper_bound", "tolerance", "max_iters",
-                    "linear_sweep_trials", "plot"}}
+                    "lower_bound", "upper_bound", "tolerance", "max_iters", "reliability",
+                    "confidence", "max_runs", "linear_sweep_trials", "plot"}}
 
 ``read_boundary_summary`` reads it back; a summary of the flat form written before (one
 object with ``pass_value``, ``edge_verdict``, trials with a ``verdict`` and a count of
@@ -33,6 +33,9 @@ EXPERIMENT_KEYS = (
     "upper_bound",
     "tolerance",
     "max_iters",
+    "reliability",
+    "confidence",
+    "max_runs",
     "linear_sweep_trials",
     "plot",
 )
