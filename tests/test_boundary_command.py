@@ -251,6 +251,9 @@ def test_a_summary_of_the_old_flat_form_is_read_as_the_new_one() -> None:
         "upper_bound": 100.0,
         "tolerance": 1.0,
         "max_iters": 10,
+        "reliability": None,  # the old form had no statistical search
+        "confidence": None,
+        "max_runs": None,
         "linear_sweep_trials": 96,
         "plot": "/old/boundary_plot.png",
     }
