@@ -403,7 +403,8 @@ def _ini_probability(config: pytest.Config, name: str) -> float:
     """The ini key ``name`` as a probability below 1 (``_ini_number`` checks the lower end)."""
     value = _ini_number(config, name)
     if value >= 1:
-        raise pytest.UsageError(f"pytest-sal: ini option {name} = {value:g}: expected {_INI_NUMBERS[name][3]}")
+        text = str(config.getini(name)).strip()
+        raise pytest.UsageError(f"pytest-sal: ini option {name} = {text!r}: expected {_INI_NUMBERS[name][3]}")
     return value
 
 
