@@ -25,6 +25,12 @@ from pytest_sal.report.reliability_plot import JITTER, reliability_figure, run_p
 HELD, FAILED, ABSTAINED = {"passed": True, "abstained": False}, {"passed": False, "abstained": False}, {"passed": False, "abstained": True}
 
 
+def x_extent(patch) -> tuple[float, float]:  # type: ignore[no-untyped-def]
+    """The x range of an ``axvspan`` patch in data units (a Rectangle from matplotlib 3.9, a Polygon before)."""
+    xs = patch.get_patch_transform().transform(patch.get_path().vertices)[:, 0]
+    return float(xs.min()), float(xs.max())
+
+
 def curve(values: np.ndarray, location: float, width: float, *, log: bool, falls_to_higher: bool) -> list[list[float]]:
     """Rows (value, median p, low, high) of a logistic falling from 0.98 to 0.35 towards the
     severe side, its band 0.1 below and 0.05 above."""
@@ -184,7 +190,8 @@ def test_curve_band_runs_and_lines_are_where_the_boundary_says() -> None:
         assert np.allclose(only(fig, "edge").get_xdata(), outcome.edge)
         assert np.allclose(only(fig, "estimate").get_xydata(), [[b.estimate, b.reliability]])
         span = only(fig, "interval")
-        assert np.isclose(span.get_x(), min(b.interval)) and np.isclose(span.get_x() + span.get_width(), max(b.interval))
+        left, right = x_extent(span)
+        assert np.isclose(left, min(b.interval)) and np.isclose(right, max(b.interval))
 
         assert ax.get_xscale() == ("log" if b.log_scale else "linear")
         assert ax.get_ylim()[0] < 0 < 1 < ax.get_ylim()[1]
@@ -204,7 +211,7 @@ def test_the_required_side_of_the_edge_is_shaded_towards_the_mild_end() -> None:
         lo, hi = fig.axes[0].get_xlim()
         shade = only(fig, "required")
         assert shade.get_label() == "required (envelope)"
-        left, right = shade.get_x(), shade.get_x() + shade.get_width()
+        left, right = x_extent(shade)
         assert (left, right) == ((outcome.edge, hi) if outcome.worse == "lower" else (lo, outcome.edge))
 
 
