@@ -96,16 +96,25 @@ class FakeSlam(SlamSystem):
         if self.flaky and self._runs % 2:
             share = min(1.0, share + self.flaky)
         self._runs += 1
-        if self.calls_file:
-            with open(self.calls_file, "a", encoding="utf-8") as handle:
-                handle.write(json.dumps({"value": value, "pid": os.getpid(), "parent": os.getppid()}) + "\n")
+        self._record(value)
         n = len(sequence)
         tracked = int(round(n * share))
         states = np.full(n, TrackState.LOST, dtype=np.int8)
         states[:tracked] = TrackState.OK
+        return self._result(sequence, states, range(tracked), time.perf_counter() - start, {"value": value, "share": share})
+
+    def _record(self, value: float | None) -> None:
+        """A line in ``calls_file``: the value run and the process that ran it and its parent."""
+        if self.calls_file:
+            with open(self.calls_file, "a", encoding="utf-8") as handle:
+                handle.write(json.dumps({"value": value, "pid": os.getpid(), "parent": os.getppid()}) + "\n")
+
+    def _result(self, sequence: Sequence, states: np.ndarray, tracked: range, seconds: float, info: dict[str, Any]) -> RunResult:
+        """The run's result: ``states`` per frame, the ground-truth poses of the ``tracked``
+        frames as the trajectory (none when nothing was tracked), one map when any was."""
         trajectory = None
-        if tracked and sequence.groundtruth is not None and sequence.groundtruth_is_per_frame:
-            trajectory = sequence.groundtruth.select(list(range(tracked)))
+        if len(tracked) and sequence.groundtruth is not None and sequence.groundtruth_is_per_frame:
+            trajectory = sequence.groundtruth.select(list(tracked))
         return RunResult(
             system=self.name,
             sequence=sequence.name,
@@ -113,10 +122,10 @@ class FakeSlam(SlamSystem):
             timestamps=sequence.timestamps,
             states=states,
             trajectory=trajectory,
-            maps=1 if tracked else 0,
-            wall_time_s=time.perf_counter() - start,
+            maps=1 if len(tracked) else 0,
+            wall_time_s=seconds,
             track_time_s=0.0,
-            info={"value": value, "share": share},
+            info=info,
         )
 
 
@@ -150,28 +159,12 @@ class BernoulliSlam(FakeSlam):
         p = 1.0 if value is None else float(np.clip(self._share(value), 0.0, 1.0))
         draw = np.random.default_rng([self.seed, self._runs, int(round(1000 * abs(value or 0)))]).random()
         self._runs += 1
-        if self.calls_file:
-            with open(self.calls_file, "a", encoding="utf-8") as handle:
-                handle.write(json.dumps({"value": value, "pid": os.getpid(), "parent": os.getppid()}) + "\n")
+        self._record(value)
         n = len(sequence)
         start = 0 if draw < p else int(round(n * (1 - self.late)))
         states = np.full(n, TrackState.OK, dtype=np.int8)
         states[:start] = TrackState.NOT_INITIALISED
-        trajectory = None
-        if sequence.groundtruth is not None and sequence.groundtruth_is_per_frame and start < n:
-            trajectory = sequence.groundtruth.select(list(range(start, n)))
-        return RunResult(
-            system=self.name,
-            sequence=sequence.name,
-            sensor=sequence.sensor,
-            timestamps=sequence.timestamps,
-            states=states,
-            trajectory=trajectory,
-            maps=1,
-            wall_time_s=0.0,
-            track_time_s=0.0,
-            info={"value": value, "held_p": p},
-        )
+        return self._result(sequence, states, range(start, n), 0.0, {"value": value, "held_p": p})
 
 
 class SleepySlam(FakeSlam):
