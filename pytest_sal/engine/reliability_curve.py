@@ -220,8 +220,9 @@ class CurveFit:
         """The entropy (nats) of ``s_R``'s posterior, binned on the grid, plus ``verdict_weight``
         times the binary entropy of "``s_R`` is at least as severe as ``edge_x``"."""
         s = self._s_at(r)
-        verdict = _binary_entropy(float(self.weights[s >= edge_x].sum())) if edge_x is not None else 0.0
-        return _entropy(np.bincount(np.searchsorted(self.axis.grid, s), self.weights, len(self.axis.grid) + 1)) + verdict_weight * verdict
+        masses = np.bincount(np.searchsorted(self.axis.grid, s), self.weights, len(self.axis.grid) + 1)
+        verdict = float(_binary_entropies(np.array([self.weights[s >= edge_x].sum()]))[0]) if edge_x is not None else 0.0
+        return float(_entropies(masses[None, :])[0]) + verdict_weight * verdict
 
     def expected_entropy(self, candidates: np.ndarray, r: float, edge_x: float | None = None, verdict_weight: float = 0.0) -> np.ndarray:
         """For each candidate ``x``: ``entropy`` expected after one more run there (lower: the
@@ -281,18 +282,8 @@ class CurveFit:
         return Interval(quantile(0.5), quantile(tail), quantile(1 - tail), quantile(1 - confidence))
 
 
-def _entropy(masses: np.ndarray) -> float:
-    """Entropy (nats) of the distribution proportional to ``masses``: ``sum(entr(m / total))``."""
-    total = masses.sum()
-    return float(special.entr(masses / total).sum()) if total > 0 else 0.0
-
-
-def _binary_entropy(p: float) -> float:
-    return float(special.entr(p) + special.entr(1 - p))
-
-
 def _entropies(masses: np.ndarray) -> np.ndarray:
-    """``_entropy`` of each row of ``masses``."""
+    """Entropy (nats) of each row of ``masses`` as a distribution: ``sum(entr(m / total))``, 0 for an empty row."""
     totals = masses.sum(axis=1, keepdims=True)
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(totals[:, 0] > 0, special.entr(masses / totals).sum(axis=1), 0.0)
