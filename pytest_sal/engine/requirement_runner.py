@@ -50,9 +50,9 @@ def search_space(ref: ParamRef, search_range: tuple[float, float] | None = None)
 
 
 def search_width(runner: TrialRunner) -> int:
-    """How many trials a round of the search may hold now: the runs ``runner``'s executor can
-    take at once (a deterministic system's trial is one run); at least 1 (``local``: always 1,
-    the sequential search)."""
+    """How many trials (a deterministic system's: one run each) or runs (a noisy system's) a
+    round of the search may hold now: the runs ``runner``'s executor can take at once; at least
+    1 (``local``: always 1, the sequential search)."""
     return max(1, runner.executor.slots(runner.system))
 
 
@@ -167,7 +167,7 @@ def _noisy_outcome(
         settings,
         space,
         edge,
-        lambda: max(1, runner.executor.slots(runner.system)),
+        functools.partial(search_width, runner),
         single=single,
         earlier=[t for t in earlier or () if not single or t.value == edge],
     )
