@@ -16,10 +16,15 @@ from pytest_sal import ate_rmse, tracking_rate
 from sal_modules import fog, night, rain, snow
 
 
-@sal.require(ate_rmse < 1.5, fog.visibility_m >= 25)
+@sal.require(ate_rmse < 1.5, fog.visibility_m >= 25, tolerance=5, search_range=(5, 200))
 def test_fog(sal_outcome):
     """Down to 25 m of visibility (dense fog is below 50 m) the trajectory stays usable. The
-    body runs after the search, on its outcome."""
+    body runs after the search, on its outcome.
+
+    ORB-SLAM3 is a noisy system, so the search fits its chance to hold over visibility, and
+    what a search costs is set by how precisely it must place that curve: ``tolerance=5``
+    (metres) and ``search_range`` between 5 and 200 m (where it fails) take about 17 runs;
+    the module's whole 1..100000 m to the default 10 % take about 28, twice the time."""
     # The requirement held at 25 m (else the test would already have failed); the body can
     # check more, here that the search did find a visibility at which the system fails.
     assert sal_outcome.boundary.fail_value < 25
