@@ -448,6 +448,27 @@ def test_the_gate_tells_a_moved_boundary_from_noise(gate_fits: dict[str, CurveFi
     )
 
 
+def test_the_gate_shares_the_curves_shape_so_short_sessions_show_a_moved_boundary() -> None:
+    """Sessions of 34 runs (2 at each design value): alone, each one's s_80 is uncertain
+    mostly through the lapse rate and width; the gate shares those between both sessions, so
+    a move of s_80 from 430.7 to 280.7 (-35 %) is declared in 8 of 10 seeded pairs (two
+    independent fits, the gate before: 4 of 10), and the unchanged system in none."""
+    caught = alarms = 0
+    for seed in range(10):
+        before = fit_curve(AXIS, *design_runs(100 + seed, runs_per_value=2))
+        same = fit_curve(AXIS, *design_runs(200 + seed, runs_per_value=2))
+        moved_now = fit_curve(AXIS, *design_runs(200 + seed, moved(LOC - 0.15), runs_per_value=2))
+        caught += regression_probability(before, moved_now, R, 10, True, "higher") >= C
+        alarms += regression_probability(before, same, R, 10, True, "higher") >= C
+    assert caught >= 7, caught
+    assert alarms <= 1, alarms
+
+
+def test_the_gate_compares_curves_on_one_axis_only(gate_fits: dict[str, CurveFit]) -> None:
+    with pytest.raises(ValueError, match="one severity axis"):
+        regression_probability(gate_fits["before"], gate_fits["mirror same"], R, 10, True, "higher")
+
+
 def test_the_gate_reads_worse_lower_as_the_mirror_of_worse_higher(gate_fits: dict[str, CurveFit]) -> None:
     before, mirror_before = gate_fits["before"], gate_fits["mirror before"]
     np.testing.assert_allclose(mirror_before.weights, before.weights, rtol=1e-9, atol=1e-15)

@@ -110,6 +110,8 @@ class _Grid:
 
     def __init__(self, step: float):
         locations = np.arange(-_BEYOND, 1 + _BEYOND + step / 4, step / 2)  # a step may lie between two grid values
+        #: grid points are ordered location first: ``reshape(locations, -1)`` gives a location x shape table
+        self.locations = len(locations)
         widths = np.geomspace(step / 8, 0.4, _WIDTHS)
         loc, wid, lapse, floor = (a.ravel() for a in np.meshgrid(locations, widths, _LAPSES, _FLOORS, indexing="ij"))
         keep = (1 - lapse) - floor >= 0.1  # the curve falls by at least 0.1: ceiling above floor

@@ -129,7 +129,8 @@ class BoundaryCheck(RegressionCheck):
         now_b, before_b = current.boundary, previous.boundary
         if now_b.reliability != before_b.reliability or now_b.search_range != before_b.search_range:
             return None  # another requirement: not comparable
-        fits = refit(previous), refit(current)
+        now_fit = refit(current)
+        fits = refit(previous, now_fit.axis) if now_fit is not None else None, now_fit
         if fits[0] is None or fits[1] is None:
             return None
         assert now_b.reliability is not None and now_b.confidence is not None
