@@ -31,6 +31,8 @@ __all__ = ["Observation", "ReliabilityResult", "more_runs_needed", "reliability_
 
 #: at most this many grid values are scored before each round (spread over where s_R may lie)
 _CANDIDATES = 20
+#: every grid value this many cells either side of s_R's median is a candidate too (the thinned set may skip them)
+_NEAR = 3
 #: while the verdict is open, its entropy weighs this much against s_R's: the verdict first (it decides the test)
 _VERDICT_WEIGHT = 20.0
 #: a cached value is taken when its gain is at least this share of the best value's
@@ -200,11 +202,14 @@ def _next_values(
 
 def _candidates(current: CurveFit, axis: SeverityAxis, edge_x: float, reliability: float) -> np.ndarray:
     """Grid values where ``s_R`` may lie (its 0.5-99.5 % posterior range, a few cells wider,
-    both ends of the range kept), thinned to at most ``_CANDIDATES``, and the edge."""
+    both ends of the range kept), thinned to at most ``_CANDIDATES``; every grid value within
+    ``_NEAR`` cells of ``s_R``'s median (so a cliff is resolved to one cell, not to the thinned
+    spacing); and the edge."""
     grid = axis.grid
     s = current.s_r(reliability, 0.99)
     lo, hi = max(0.0, s.low - 4 * axis.step), min(1.0, s.high + 4 * axis.step)
     inside = grid[(grid >= lo) & (grid <= hi)]
     if len(inside) > _CANDIDATES:
         inside = inside[:: math.ceil(len(inside) / _CANDIDATES)]
-    return np.unique(np.concatenate([inside, [edge_x]]))
+    near = grid[np.abs(grid - s.estimate) <= _NEAR * axis.step * (1 + 1e-9)]
+    return np.unique(np.concatenate([inside, near, [edge_x]]))
