@@ -113,7 +113,7 @@ OPTIONS: tuple[tuple[str, dict[str, Any]], ...] = (
             dest="sal_save",
             metavar="NAME",
             default=None,
-            help="name this run in the history, e.g. --sal-save=main on the main branch; a run in which a "
+            help="name this run in the history (at most 100 characters), e.g. --sal-save=main on the main branch; a run in which a "
             "--sal-compare-fail check failed is saved without the name, so it cannot become the baseline",
         ),
     ),
@@ -308,7 +308,7 @@ def read_options(config: pytest.Config) -> SalOptions:
         cache_frames=bool(option.sal_cache_frames),
         history_dir=Path(option.sal_history_dir or config.getini("sal_history_dir") or root / ".sal" / "history"),
         save_history=not option.sal_no_history,
-        save_name=option.sal_save,
+        save_name=_save_name(option.sal_save),
         compare=compare,
         checks=checks,
         compare_missing=_compare_missing(config),
@@ -342,6 +342,25 @@ def _check_space_forms(config: pytest.Config) -> None:
     problem = space_form_problem(args, str(config.rootpath), None if config.inipath is None else str(config.inipath))
     if problem:
         raise pytest.UsageError(f"pytest-sal: {problem}")
+
+
+#: the longest ``--sal-save`` name: it becomes part of each run file's name (255 bytes at most on most file systems)
+_SAVE_NAME_MAX = 100
+
+
+def _save_name(name: str | None) -> str | None:
+    """``--sal-save``'s name, checked before anything runs: not empty, at most ``_SAVE_NAME_MAX``
+    characters (a longer one used to pass and silently leave the baseline unsaved)."""
+    if name is None:
+        return None
+    if not name.strip():
+        raise pytest.UsageError("pytest-sal: --sal-save needs a name, e.g. --sal-save=main")
+    if len(name) > _SAVE_NAME_MAX:
+        raise pytest.UsageError(
+            f"pytest-sal: --sal-save: the name is {len(name)} characters long; at most {_SAVE_NAME_MAX} "
+            "(it becomes part of the history's file names)"
+        )
+    return name
 
 
 def _compare_missing(config: pytest.Config) -> str:

@@ -156,6 +156,9 @@ BAD_OUTPUTS = [
     ("--sal-report-html=/dev/null", "--sal-report-html /dev/null: /dev/null exists and is not a folder; give another folder"),
     ("--sal-report-md={tmp}", "--sal-report-md {tmp}: {tmp} is a folder; give another file"),
     ("-o sal_system=nosuch", "ini option sal_system = 'nosuch': unknown SLAM system; known: command, orbslam3, reference_vo"),
+    # a 300-character name used to pass with exit 0 and leave the baseline unsaved ("File name too long")
+    ("--sal-save=" + "n" * 300, "--sal-save: the name is 300 characters long; at most 100 (it becomes part of the history's file names)"),
+    ("--sal-save=", "--sal-save needs a name, e.g. --sal-save=main"),
 ]
 
 
