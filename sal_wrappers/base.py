@@ -23,11 +23,14 @@ import numpy as np
 from sal_adapters import Sequence, Trajectory
 from sal_adapters.errors import SalError
 
-__all__ = ["WRITTEN_BEFORE_FAILURE", "RunResult", "SlamSystem", "SlamSystemError", "StopCheck", "TrackState", "file_sha256"]
+__all__ = ["NO_FRAMES", "WRITTEN_BEFORE_FAILURE", "RunResult", "SlamSystem", "SlamSystemError", "StopCheck", "TrackState", "file_sha256"]
 
 #: ``RunResult.info`` key: the system wrote its whole result before it failed (a crash at
 #: shutdown); the run is scored all the same and keeps its ``failure``.
 WRITTEN_BEFORE_FAILURE = "written_before_failure"
+
+#: ``RunResult.failure`` of a run on a sequence with no frames (``SlamSystem.no_frames_result``)
+NO_FRAMES = "the sequence has no frames (every frame dropped?): nothing to run on"
 
 #: ``SlamSystem.run``'s ``stop``: called with the ``TrackState`` values (int8) of the first
 #: frames, those whose state is final so far, and the number of frames given; a reason (text)
@@ -276,6 +279,18 @@ class SlamSystem:
         named = [f"version {program}"] if isinstance(program, str) else []
         named += [f"{key} {value}" for key, value in identity.items() if key not in ("name", "system") and isinstance(value, str)]
         return f"{self.name} ({', '.join(named)}) #{digest}" if named else f"{self.name} #{digest}"
+
+    def no_frames_result(self, sequence: Sequence) -> RunResult:
+        """The failed run on a sequence with no frames (``frame_drop`` at ``drop_rate`` 1): no
+        system can run on it, so none is started and the reason is ``NO_FRAMES``."""
+        return RunResult(
+            system=self.name,
+            sequence=sequence.name,
+            sensor=sequence.sensor,
+            timestamps=sequence.timestamps,
+            states=np.zeros(0, np.int8),
+            failure=NO_FRAMES,
+        )
 
     def mode_for(self, sequence: Sequence, mode: str | None = None) -> str:
         """The sensor mode to run ``sequence`` in: ``mode`` if given, else the sequence's own

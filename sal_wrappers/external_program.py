@@ -164,6 +164,8 @@ class CommandSystem(SlamSystem):
         (the system is not ``stoppable``, so the trial runner gives it none)."""
         config = self.config
         mode = self.mode_for(sequence, config.sensor)
+        if not len(sequence):
+            return self.no_frames_result(sequence)
         workdir = Path(workdir).expanduser().resolve()
         workdir.mkdir(parents=True, exist_ok=True)
         layout = config.layout or sequence.kind

@@ -224,3 +224,31 @@ def test_unknown_placeholder_in_settings_names_file_and_line(tmp_path):
 def test_stereo_mode_on_a_mono_sequence_is_bad_use(indoor, tmp_path):
     with pytest.raises(SlamSystemError, match="cannot run in 'stereo' mode"):
         create("command", argv=["slam"], sensor="stereo").run(indoor, tmp_path / "w")
+
+
+# -- an empty sequence is a failed run, not an exception (issue 23, item 2) ------------------------------
+def test_an_empty_sequence_is_a_failed_run_with_the_reason(scripts, tiny, tmp_path):
+    """frame_drop at drop_rate = 1 leaves no frame: staging used to raise ``DatasetError: ...:
+    no frames to write`` out of ``run()``, failing every team's frame-drop search."""
+    empty = tiny.select([])
+    result = create("command", argv=fake(scripts), sensor="mono", layout="folder").run(empty, tmp_path / "w", timeout=60)
+    assert result.failure == "the sequence has no frames (every frame dropped?): nothing to run on"
+    assert len(result.states) == 0 and result.exit_status is None
+
+
+def test_a_search_that_drops_every_frame_fails_those_runs_for_every_system(scripts, indoor, tmp_path):
+    """Through the trial runner (``run_job``), whatever the system: the run at drop_rate = 1
+    fails with the reason and the trial is a failed trial, not an error."""
+    from pytest_sal import tracking_rate
+    from pytest_sal.engine.requirements import Requirement
+    from pytest_sal.engine.trial_runner import TrialRunner
+    from pytest_sal.testing import FakeSlam
+    from sal_modules import frame_drop
+
+    requirement = Requirement.build([tracking_rate >= 0.5, frame_drop.drop_rate <= 0.3])
+    command = create("command", argv=fake(scripts), sensor="mono", layout="folder")
+    for system in (command, FakeSlam()):
+        runner = TrialRunner(indoor.select(range(6)), frame_drop.drop_rate.ref(), system, requirement, workdir=tmp_path / system.name)
+        trial = runner.evaluate(1.0)
+        assert not trial.passed, system.name
+        assert trial.runs[0]["failure"] == "the sequence has no frames (every frame dropped?): nothing to run on", trial.runs[0]

@@ -128,7 +128,10 @@ def run_job(job: RunJob, worker: str | None = None) -> RunOutput:
     load = machine_load()
     stop = {"stop": job.stop} if job.stop is not None and job.system.stoppable else {}  # others never take one
     try:
-        result = job.system.run(perturbed, job.workdir / f"{job.key[:12]}-run{job.number}", timeout=job.timeout, **stop)
+        if len(perturbed):
+            result = job.system.run(perturbed, job.workdir / f"{job.key[:12]}-run{job.number}", timeout=job.timeout, **stop)
+        else:  # every frame dropped: no system can run on it
+            result = job.system.no_frames_result(perturbed)
     except MemoryError:
         result = _not_initialised(job.system, perturbed, "out of memory (MemoryError)")
     record, scored = _scored_record(job, result, groundtruth, machine_failure(result, load))
