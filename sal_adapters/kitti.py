@@ -141,10 +141,33 @@ def read_calib(path: Path, required: list[str]) -> dict[str, np.ndarray]:
             calib[key] = np.array([float(v) for v in fields[1:]]).reshape(3, 4)
         except ValueError:
             raise DatasetError(f"expected 12 numbers after '{key}:'", path, number) from None
+        _check_projection(calib[key], key, path, number)
     missing = [key for key in required if key not in calib]
     if missing:
         raise DatasetError(f"missing projection matrix {', '.join(missing)} (found: {', '.join(calib) or 'none'})", path)
     return calib
+
+
+#: focal lengths (px) a camera can have: a 1 px lens to a 10^6 px telescope
+_FOCAL_RANGE_PX = (1.0, 1e6)
+
+
+def _check_projection(P: np.ndarray, key: str, path: Path, line: int) -> None:
+    """``DatasetError`` naming file, line and key unless ``P`` is a camera: finite numbers,
+    focal lengths ``fx = P[0, 0]`` and ``fy = P[1, 1]`` within ``_FOCAL_RANGE_PX``, and an
+    invertible left 3x3 block (``_camera0_to_camera`` solves with it)."""
+    low, high = _FOCAL_RANGE_PX
+    for name, value in (("fx", P[0, 0]), ("fy", P[1, 1])):
+        if not low <= value <= high:  # also false for nan
+            raise DatasetError(
+                f"{key}: the focal length {name} = {value:g} px is not a camera's: expected a finite number between {low:g} and {high:g} px",
+                path,
+                line,
+            )
+    if not np.isfinite(P).all():
+        raise DatasetError(f"{key}: expected 12 finite numbers, got {' '.join(f'{v:g}' for v in P.ravel())}", path, line)
+    if abs(np.linalg.det(P[:, :3])) < 1e-12 * high**2:
+        raise DatasetError(f"{key}: the left 3x3 block of the projection matrix is singular", path, line)
 
 
 def _camera0_to_camera(P: np.ndarray) -> np.ndarray:

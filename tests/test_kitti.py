@@ -173,6 +173,31 @@ def test_calib_without_the_needed_matrix(kitti07, tmp_path):
         open_dataset("kitti", seq_dir, stereo=True)
 
 
+@pytest.mark.parametrize("fx", ["nan", "0", "-707.1", "1e308", "inf"])
+def test_a_focal_length_that_is_not_a_camera_is_named_with_its_file_line_and_key(kitti07, tmp_path, fx):
+    """fx = nan, 0 or negative used to be a ValueError traceback from Camera; 1e308 was
+    accepted (issue 23, item 12)."""
+    seq_dir = make_copy(kitti07, tmp_path)
+    lines = (kitti07 / "calib.txt").read_text().splitlines()
+    fields = lines[0].split()
+    fields[1] = fx
+    (seq_dir / "calib.txt").write_text("\n".join([" ".join(fields), *lines[1:]]) + "\n")
+    with pytest.raises(DatasetError) as info:
+        open_dataset("kitti", seq_dir)
+    assert str(info.value).startswith(f"{seq_dir / 'calib.txt'}:1: P0: the focal length fx = {float(fx):g} px")
+    assert "expected a finite number between 1 and 1e+06 px" in str(info.value)
+
+
+def test_a_projection_matrix_with_non_finite_values_is_named(kitti07, tmp_path):
+    seq_dir = make_copy(kitti07, tmp_path)
+    lines = (kitti07 / "calib.txt").read_text().splitlines()
+    fields = lines[1].split()
+    fields[4] = "nan"  # P1's baseline term
+    (seq_dir / "calib.txt").write_text("\n".join([lines[0], " ".join(fields), *lines[2:]]) + "\n")
+    with pytest.raises(DatasetError, match=r"calib.txt:2: P1: expected 12 finite numbers"):
+        open_dataset("kitti", seq_dir, stereo=True)
+
+
 def test_malformed_times_line_is_named(kitti07, tmp_path):
     seq_dir = make_copy(kitti07, tmp_path)
     lines = (seq_dir / "times.txt").read_text().splitlines()
