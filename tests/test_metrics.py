@@ -345,3 +345,17 @@ def test_run_metrics_fields_are_json_ready() -> None:
         maps=0,
     )
     assert json.loads(json.dumps(metrics.to_dict()))["scored"] == "final"
+
+
+@pytest.mark.parametrize("position", [1e308, -1e308, 1e12])
+@pytest.mark.parametrize("sensor", ["mono", "stereo"])
+def test_poses_far_beyond_any_drive_fail_the_run_with_the_reason_instead_of_raising(position: float, sensor: str) -> None:
+    """Poses at 1e308 m made evo's alignment raise ``LinAlgError: SVD did not converge``, which
+    failed the test instead of the run (issue 23, item 12)."""
+    gt = curve()
+    positions = gt.positions.copy()
+    positions[50:60] = position
+    estimate = Trajectory(gt.timestamps, positions, gt.quaternions)
+    scored = evaluate(run_result(estimate, sensor=sensor), gt)
+    assert scored.failure is not None and scored.failure.startswith("not scored: 10 of 200 poses lie beyond 1e+06 m from the origin")
+    assert scored.ate_rmse is None and scored.tracking_rate == 1.0

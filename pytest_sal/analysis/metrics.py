@@ -19,7 +19,7 @@ from sal_adapters.errors import SalError
 from sal_adapters.trajectory import Trajectory
 from sal_wrappers.base import WRITTEN_BEFORE_FAILURE, RunResult
 
-__all__ = ["AGGREGATED", "RunMetrics", "aggregate", "evaluate"]
+__all__ = ["AGGREGATED", "MAX_POSITION_M", "RunMetrics", "aggregate", "evaluate"]
 
 #: ``RunMetrics`` fields that ``aggregate`` summarises
 AGGREGATED = ("ate_rmse", "rpe_trans", "rpe_rot", "t_rel", "r_rel", "scale_error", "tracking_rate", "first_tracked", "maps", "matched")
@@ -80,6 +80,10 @@ class RunMetrics:
         return {name: getattr(self, name) for name in self.__dataclass_fields__ if name != "ate"}
 
 
+#: a pose farther than this from the origin (m) is no SLAM estimate of a recorded drive: the run is not scored
+MAX_POSITION_M = 1e6
+
+
 def evaluate(
     result: RunResult,
     groundtruth: Trajectory | None,
@@ -128,10 +132,15 @@ def evaluate(
         return replace(unscored, failure=f"{poses} pose(s) in the scored trajectory: too few to score (need {MIN_POSES})")
     if groundtruth is None:
         return replace(unscored, failure=result.failure)
+    far = int((~(np.abs(trajectory.positions) <= MAX_POSITION_M).all(axis=1)).sum())  # nan and inf too, without overflow
+    if far:
+        return replace(
+            unscored, failure=f"not scored: {far} of {poses} poses lie beyond {MAX_POSITION_M:g} m from the origin or are not finite"
+        )
     fps = _frame_rate(result.timestamps)
     try:
         absolute = ate(trajectory, groundtruth, align=align, max_diff=max_diff, fps=fps)
-    except SalError as exc:
+    except (SalError, np.linalg.LinAlgError) as exc:  # an alignment whose SVD does not converge, too
         return replace(unscored, failure=f"not scored: {exc}")
     relative: RpeResult | None
     try:
