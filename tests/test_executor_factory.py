@@ -4,6 +4,7 @@ a RayExecutor says before it connects (nothing here starts Ray)."""
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -45,3 +46,25 @@ def test_a_ray_executor_starts_nothing_until_its_first_run() -> None:
     assert remote.slots(reference_vo) == 1 and remote.address == "ray://head.example:10001"
     executor.close()  # nothing to shut down
     remote.close()
+
+
+def test_a_local_rays_token_file_is_private_to_its_user(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Ray wrote ~/.ray/auth_token 0644 in a 0755 folder, and another local user connected
+    with it and ran a task as the CI user (issue 23, item 11): the plugin writes it 0600 in a
+    0700 folder, and makes an existing one 0600."""
+    pytest.importorskip("ray", reason="the ray extra is not installed")
+    from pytest_sal.engine.ray_executor import private_home_token
+
+    monkeypatch.setenv("HOME", str(tmp_path))
+    monkeypatch.delenv("RAY_AUTH_TOKEN", raising=False)
+    monkeypatch.delenv("RAY_AUTH_TOKEN_PATH", raising=False)
+    path = private_home_token()
+    assert path == tmp_path / ".ray" / "auth_token"
+    assert path.stat().st_mode & 0o777 == 0o600 and path.parent.stat().st_mode & 0o777 == 0o700
+    token = path.read_text()
+    assert len(token) >= 32
+    path.chmod(0o644)  # written by Ray before this fix
+    assert private_home_token() == path and path.stat().st_mode & 0o777 == 0o600 and path.read_text() == token
+    monkeypatch.setenv("RAY_AUTH_TOKEN", "given")  # the environment gives the token: no file is made
+    path.unlink()
+    assert private_home_token() is None and not path.exists()

@@ -15,7 +15,7 @@ suite served from the cache never starts Ray:
 
 Token authentication (Ray 2.60 turns it on for a local Ray that ``ray.init`` starts): the token
 comes from ``RAY_AUTH_TOKEN``, else the file ``RAY_AUTH_TOKEN_PATH`` names, else
-``~/.ray/auth_token`` (which a local start writes when there is no token). Joining a
+``~/.ray/auth_token`` (which a local start writes, mode 0600, when there is no token: ``private_home_token``). Joining a
 ``host:port`` address without ``RAY_AUTH_MODE`` set asks the cluster first and turns token
 mode on when it wants one (a pytest-xdist worker started before the controller's Ray sees the
 token but has no ``RAY_AUTH_MODE=token``).
@@ -46,6 +46,7 @@ from typing import Any
 os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
 
 import ray
+from ray._private.authentication.authentication_token_generator import generate_new_authentication_token
 from ray._private.authentication.authentication_token_setup import maybe_enable_token_auth_if_token_available
 from ray._raylet import GcsClient  # type: ignore[attr-defined]  # the compiled module; its stub leaves it out
 from ray.exceptions import (
@@ -64,7 +65,7 @@ from pytest_sal.engine.run_job import RunJob, RunOutput, failed_output, run_job,
 from sal_adapters.errors import SalError
 from sal_wrappers import SlamSystem
 
-__all__ = ["OBJECT_STORE_BYTES", "RESULT_GRACE_S", "RayExecutor"]
+__all__ = ["OBJECT_STORE_BYTES", "RESULT_GRACE_S", "RayExecutor", "private_home_token"]
 
 #: Seconds a task may take beyond its run's timeout (per attempt) before it is cancelled.
 RESULT_GRACE_S = 60.0
@@ -82,6 +83,28 @@ class _ClusterView:
 
     at: float
     nodes: list[dict[str, float]]
+
+
+def private_home_token() -> Path | None:
+    """The token file a local start uses when neither ``RAY_AUTH_TOKEN`` nor
+    ``RAY_AUTH_TOKEN_PATH`` is set: ``~/.ray/auth_token``, made here (a new token, mode 0600
+    in a folder made 0700) instead of by Ray, which writes it 0644 so that another local user
+    can read it and run tasks as this one; an existing one of this user's readable by others
+    is made 0600. ``None`` when the environment gives the token."""
+    if os.environ.get("RAY_AUTH_TOKEN") or os.environ.get("RAY_AUTH_TOKEN_PATH"):
+        return None
+    path = Path.home() / ".ray" / "auth_token"
+    path.parent.mkdir(mode=0o700, exist_ok=True)
+    try:
+        descriptor = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    except FileExistsError:
+        status = path.stat()
+        if status.st_mode & 0o077 and status.st_uid == os.getuid():
+            path.chmod(0o600)
+        return path
+    with os.fdopen(descriptor, "w") as handle:
+        handle.write(generate_new_authentication_token())
+    return path
 
 
 class RayExecutor(Executor):
@@ -152,6 +175,7 @@ class RayExecutor(Executor):
         root = self.temp_dir if self.temp_dir is not None else Path("/tmp")
         self._folder = Path(tempfile.mkdtemp(prefix="sal-ray-", dir=root))
         try:
+            private_home_token()
             ray.init(
                 num_cpus=self.num_cpus if self.num_cpus is not None else os.cpu_count(),
                 _node_ip_address="127.0.0.1",
