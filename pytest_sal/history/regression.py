@@ -130,11 +130,11 @@ class BoundaryCheck(RegressionCheck):
         if now_b.reliability != before_b.reliability or now_b.search_range != before_b.search_range:
             return None  # another requirement: not comparable
         now_fit = refit(current)
-        fits = refit(previous, now_fit.axis) if now_fit is not None else None, now_fit
-        if fits[0] is None or fits[1] is None:
+        before_fit = refit(previous, now_fit.axis) if now_fit is not None else None  # the baseline on this run's axis
+        if now_fit is None or before_fit is None:
             return None
         assert now_b.reliability is not None and now_b.confidence is not None
-        probability = regression_probability(fits[0], fits[1], now_b.reliability, self.limit, self.relative, current.worse)
+        probability = regression_probability(before_fit, now_fit, now_b.reliability, self.limit, self.relative, current.worse)
         if probability < now_b.confidence:
             return None
         name, unit = f"s{100 * now_b.reliability:.4g}", now_b.unit or before_b.unit
