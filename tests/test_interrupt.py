@@ -1,6 +1,12 @@
 """Ctrl-C during a boundary search ends in pytest's interrupted summary, not a traceback
 (issue 12: the search ran in fixture setup, and ``tmp_path``'s teardown raised a 60-line
-``KeyError: <StashKey>``)."""
+``KeyError: <StashKey>``).
+
+The inner session is started with SIGINT at its default: a test run started in the background
+of a non-interactive shell (``.ci/run &``, ``nohup``) ignores SIGINT, the inner session
+inherited that and slept on through the search (issue 23, item 16). No clock bounds the wait:
+the sleepy system wakes after 60 s a run, so a lost interrupt ends in a passed session, which
+fails the test."""
 
 from __future__ import annotations
 
@@ -59,6 +65,11 @@ def test_point(sal_trial):
 """
 
 
+def _default_sigint() -> None:
+    """In the child before exec: SIGINT at its default, so Python installs KeyboardInterrupt."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 @pytest.mark.parametrize("test", ["test_fog", "test_point"])
 def test_ctrl_c_during_the_search_is_pytests_interrupted_summary(tmp_path: Path, test: str) -> None:
     (tmp_path / "conftest.py").write_text(CONFTEST)
@@ -71,14 +82,14 @@ def test_ctrl_c_during_the_search_is_pytests_interrupted_summary(tmp_path: Path,
         stderr=subprocess.STDOUT,
         text=True,
         env=dict(os.environ, PYTHONDONTWRITEBYTECODE="1"),
+        preexec_fn=_default_sigint,
     )
     try:
-        deadline = time.monotonic() + 120
         while not (tmp_path / "running").exists():
-            assert process.poll() is None and time.monotonic() < deadline, process.communicate()[0]
+            assert process.poll() is None, process.communicate()[0]
             time.sleep(0.05)
         process.send_signal(signal.SIGINT)
-        output, _ = process.communicate(timeout=30)
+        output, _ = process.communicate()
     finally:
         process.kill()
     assert process.returncode == pytest.ExitCode.INTERRUPTED, output
