@@ -43,7 +43,6 @@ def test_a_run_that_never_initialises_stops_in_the_child_with_the_full_runs_verd
     assert stopped.failure is None and stopped.exit_status == 0 and stopped.info["phase"] == "done"  # not a crash
     assert stopped.info["frames_reported"] == 15 and stopped.load["frames"] == 15 and stopped.final_trajectory is None
     assert stopped.frames == 140 and (stopped.states == TrackState.NOT_INITIALISED).all()  # frames not run: not tracked
-    assert stopped.wall_time_s < full.wall_time_s / 2
     verdict = Requirement.build([tracking_rate >= 0.9]).holds
     assert verdict({"tracking_rate": stopped.tracking_rate}) is verdict({"tracking_rate": full.tracking_rate}) is False
 

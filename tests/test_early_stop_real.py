@@ -67,7 +67,6 @@ def test_a_run_that_loses_track_stops_early_with_the_full_runs_verdict(kitti07: 
     assert lost >= 15 and lost <= by < 140  # decided before the last frame
     assert not trial.passed and trial.passed == full_at_2_lux.passed and trial.failed == ["tracking_rate >= 0.9"]
     assert run["tracking_rate"] <= full["tracking_rate"] and run["failure"] is None  # scored on what it tracked
-    assert run["wall_time_s"] < full["wall_time_s"]
     # a milder requirement on the same frames does not read the stopped run: it runs to the end
     # and gets exactly the full run's metrics
     milder = runner(kitti07, tracking_rate >= 0.5, tmp_path / "work", cache).evaluate(2.0)
@@ -89,7 +88,7 @@ def test_a_system_that_never_initialises_stops_once_too_few_frames_are_left(shar
     assert full.tracked == 0 and full.stopped is None and full.failure == "no frame was tracked"
     # 95 frames: 86 tracked are needed (85.5), so the 10th untracked frame decides
     assert stopped.stopped == "tracking_rate >= 0.9 can no longer hold: not initialised by frame 10 of 95 (0.8947 at best)"
-    assert stopped.failure is None and stopped.info["frames_processed"] == 10 and stopped.wall_time_s < full.wall_time_s
+    assert stopped.failure is None and stopped.info["frames_processed"] == 10
     assert stopped.frames == 95 and (stopped.states == TrackState.NOT_INITIALISED).all()  # frames not run: not tracked
     assert "# stopped after frame 9: tracking_rate >= 0.9" in stopped.log_tail
     verdict = Requirement.build([tracking_rate >= 0.9]).holds
