@@ -81,20 +81,17 @@ def _child(tmp_path: Path, root: Path, key: str, mode: str) -> tuple[subprocess.
     return proc, signal_file
 
 
-def _wait_for(path: Path, proc: subprocess.Popen, timeout: float = 20.0) -> None:
-    deadline = time.monotonic() + timeout
+def _wait_for(path: Path, proc: subprocess.Popen) -> None:
+    """Until the child writes ``path`` (no clock: the child writes it or exits)."""
     while not path.exists():
         if proc.poll() is not None:
             raise AssertionError(f"child exited {proc.returncode}: {proc.stderr.read()}")
-        if time.monotonic() > deadline:
-            proc.kill()
-            raise AssertionError(f"child never wrote {path}")
         time.sleep(0.005)
 
 
 def _kill(proc: subprocess.Popen) -> None:
     proc.send_signal(signal.SIGKILL)
-    proc.communicate(timeout=10)  # reaps it and closes its pipes
+    proc.communicate()  # reaps it and closes its pipes
     assert proc.returncode == -signal.SIGKILL
 
 
@@ -141,7 +138,7 @@ def test_two_processes_compute_once(tmp_path: Path) -> None:
         return {"pid": os.getpid(), "ate": (0.25, 0.5)}
 
     mine, mine_cached = ContentCache(root).compute(key, trial)
-    out, err = proc.communicate(timeout=20)
+    out, err = proc.communicate()
     assert proc.returncode == 0, err
     theirs, theirs_cached = eval(out.strip())
     assert Path(f"{signal_file}.count").read_text().count("\n") == 1  # SLAM ran exactly once
@@ -163,5 +160,5 @@ def test_waiter_computes_when_the_holder_fails(tmp_path: Path) -> None:
     data, cached = ContentCache(root).compute(key, trial)
     assert child_failed_first == [True]  # it waited for the child, then computed once
     assert (data, cached) == ({"by": "parent"}, False)
-    _, err = proc.communicate(timeout=20)
+    _, err = proc.communicate()
     assert proc.returncode == 1 and "boom in child" in err
