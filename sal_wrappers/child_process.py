@@ -23,7 +23,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -48,6 +48,8 @@ class ChildOutcome:
         log_path: the child's stdout and stderr.
         log_tail: the last lines of that log.
         timed_out: the child was killed at the deadline.
+        cpu_at_timeout_s: CPU time (s) the run's processes had had when the deadline killed
+            them (``RunGuard.cpu_seconds``), else ``None``.
     """
 
     result: dict[str, Any] | None
@@ -57,6 +59,7 @@ class ChildOutcome:
     log_path: Path
     log_tail: str
     timed_out: bool = False
+    cpu_at_timeout_s: float | None = None
 
 
 def describe_exit(status: int) -> str:
@@ -116,7 +119,7 @@ def run_child(
                 start_new_session=True,
             )
         guard.watch(process.pid)
-        status, timed_out, feed_error = _feed(process, header, frames, timeout)
+        status, timed_out, feed_error, cpu = _feed(process, header, frames, timeout, guard.cpu_seconds)
     wall = time.monotonic() - start
     result = None
     if result_path.is_file():
@@ -133,7 +136,7 @@ def run_child(
         failure = describe_exit(status)
     elif result is None:
         failure = "the child exited without writing a result"
-    return ChildOutcome(result, status, failure, wall, log_path, log_tail(log_path), timed_out)
+    return ChildOutcome(result, status, failure, wall, log_path, log_tail(log_path), timed_out, cpu)
 
 
 def write_result(path: Path, data: dict[str, Any]) -> None:
@@ -144,16 +147,23 @@ def write_result(path: Path, data: dict[str, Any]) -> None:
 
 
 def _feed(
-    process: subprocess.Popen[bytes], header: dict[str, Any], frames: Iterable[Any], timeout: float | None
-) -> tuple[int, bool, BaseException | None]:
+    process: subprocess.Popen[bytes],
+    header: dict[str, Any],
+    frames: Iterable[Any],
+    timeout: float | None,
+    cpu_seconds: Callable[[], float | None],
+) -> tuple[int, bool, BaseException | None, float | None]:
     """Stream the messages into the child and wait for it; ``(exit status, timed out, error
-    producing a frame)``. The child's process group is killed when it timed out, when a frame
-    could not be produced, and whatever is left of it when the child exits."""
+    producing a frame, cpu_seconds() at the deadline)``. The child's process group is killed
+    when it timed out, when a frame could not be produced, and whatever is left of it when the
+    child exits."""
     stdin = process.stdin
     assert stdin is not None  # started with stdin=PIPE
     timed_out = threading.Event()
+    cpu_at_timeout: list[float | None] = [None]
 
     def kill() -> None:
+        cpu_at_timeout[0] = cpu_seconds()
         timed_out.set()
         _kill(process)
 
@@ -182,7 +192,7 @@ def _feed(
             pass
         _kill(process)  # before reaping: the group id stays reserved until then
         status = process.wait()
-    return status, timed_out.is_set(), feed_error
+    return status, timed_out.is_set(), feed_error, cpu_at_timeout[0]
 
 
 def _messages(header: dict[str, Any], frames: Iterable[Any]) -> Iterator[Any]:

@@ -191,7 +191,7 @@ class CommandSystem(SlamSystem):
         stage_time = time.monotonic() - stage_start
 
         log_path = workdir / LOG_NAME
-        status, timed_out, wall, start_error = run_process_group(command, cwd, env, log_path, timeout)
+        status, timed_out, wall, start_error, cpu_at_timeout = run_process_group(command, cwd, env, log_path, timeout)
 
         info: dict[str, Any] = {
             "argv": command,
@@ -203,6 +203,8 @@ class CommandSystem(SlamSystem):
             "time_unit": config.time_unit,
             "stage_time_s": round(stage_time, 3),
         }
+        if cpu_at_timeout is not None:
+            info["cpu_at_timeout_s"] = round(cpu_at_timeout, 3)
         if config.settings is not None:
             info["settings"] = str(workdir / "settings" / config.settings.name)
         stamps = sequence.timestamps

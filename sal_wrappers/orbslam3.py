@@ -318,6 +318,8 @@ class OrbSlam3(SlamSystem):
         }
         if final_error:
             info["final_error"] = final_error
+        if outcome.cpu_at_timeout_s is not None:
+            info["cpu_at_timeout_s"] = round(outcome.cpu_at_timeout_s, 3)
         return RunResult(
             system=self.name,
             sequence=sequence.name,

@@ -18,13 +18,26 @@ import uuid
 from collections.abc import Mapping
 from pathlib import Path
 from types import TracebackType
+from typing import NamedTuple
 
 from sal_wrappers import watchdog
 
-__all__ = ["KILL_GRACE_S", "RunGuard", "run_process_group", "wait_unreaped"]
+__all__ = ["KILL_GRACE_S", "GroupRun", "RunGuard", "process_cpu_seconds", "run_process_group", "wait_unreaped"]
 
 #: Seconds between SIGTERM and SIGKILL when a run times out.
 KILL_GRACE_S = 3.0
+
+
+class GroupRun(NamedTuple):
+    """What ``run_process_group`` saw: ``status`` (exit status; ``None`` when it never started),
+    ``timed_out``, ``wall_time_s``, ``start_error`` (why it did not start) and
+    ``cpu_at_timeout_s`` (``RunGuard.cpu_seconds`` when the deadline killed it, else ``None``)."""
+
+    status: int | None
+    timed_out: bool
+    wall_time_s: float
+    start_error: str | None
+    cpu_at_timeout_s: float | None = None
 
 
 class RunGuard:
@@ -83,11 +96,36 @@ class RunGuard:
             self._watchdog.kill()
             self._watchdog.wait()
 
+    def cpu_seconds(self) -> float | None:
+        """CPU time (s, user + system, with the children each has reaped) the run's processes
+        have had so far: every process carrying its mark; ``None`` without ``/proc``. Taken at a
+        timeout, it tells a run that was too slow (it used its time) from one the machine
+        stopped or throttled (it got little of it)."""
+        if not os.path.isdir("/proc"):
+            return None
+        return sum(process_cpu_seconds(pid) or 0.0 for pid in watchdog.marked_pids(self.token))
+
     def _tell(self, line: str) -> None:
         try:
             os.write(self._pipe, line.encode())  # type: ignore[arg-type]
         except OSError:
             pass  # the watchdog is gone (killed by someone): the run is still cleaned up here
+
+
+def process_cpu_seconds(pid: int) -> float | None:
+    """CPU time (s) of process ``pid`` from ``/proc/<pid>/stat``: utime + stime + cutime + cstime
+    (fields 14-17, in clock ticks); ``None`` when it cannot be read (gone, no ``/proc``)."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as handle:
+            stat = handle.read()
+    except OSError:
+        return None
+    fields = stat[stat.rfind(b")") + 2 :].split()  # after "pid (comm) ": field 3 is fields[0]
+    try:
+        ticks = sum(int(fields[i]) for i in range(11, 15))
+    except (IndexError, ValueError):
+        return None
+    return ticks / os.sysconf("SC_CLK_TCK")
 
 
 def _killpg(pid: int, sig: int) -> None:
@@ -120,10 +158,10 @@ def wait_unreaped(process: subprocess.Popen[bytes]) -> None:
 
 def run_process_group(
     command: list[str], cwd: Path, env: dict[str, str], log_path: Path, timeout: float | None
-) -> tuple[int | None, bool, float, str | None]:
+) -> GroupRun:
     """Run ``command`` in its own process group with stdout and stderr to ``log_path``.
 
-    Returns ``(exit status, timed out, wall time, start error)``; past ``timeout`` the group gets
+    Returns a ``GroupRun``; past ``timeout`` the group gets
     SIGTERM, then SIGKILL after ``KILL_GRACE_S``. Whatever is left of the group when the program
     exits is killed too, and so is every process it started that left the group (``RunGuard``);
     when the calling process dies first, the run's watchdog kills them all.
@@ -144,17 +182,17 @@ def run_process_group(
             )
         except FileNotFoundError:
             where = "not on PATH" if os.sep not in command[0] else "no such file"
-            return None, False, time.monotonic() - start, f"executable not found: {command[0]!r} ({where})"
+            return GroupRun(None, False, time.monotonic() - start, f"executable not found: {command[0]!r} ({where})")
         except PermissionError:
-            return None, False, time.monotonic() - start, f"executable {command[0]!r} cannot be run (permission denied; is it executable?)"
+            return GroupRun(None, False, time.monotonic() - start, f"executable {command[0]!r} cannot be run (permission denied; is it executable?)")
         except OSError as exc:
-            return None, False, time.monotonic() - start, f"could not start {command[0]!r}: {exc.strerror or exc}"
+            return GroupRun(None, False, time.monotonic() - start, f"could not start {command[0]!r}: {exc.strerror or exc}")
         guard.watch(process.pid)
-        timed_out = False
+        timed_out, cpu = False, None
         try:
             while not _exited(process):
                 if timeout is not None and time.monotonic() - start >= timeout:
-                    timed_out = True
+                    timed_out, cpu = True, guard.cpu_seconds()
                     _killpg(process.pid, signal.SIGTERM)
                     grace_end = time.monotonic() + KILL_GRACE_S
                     while not _exited(process) and time.monotonic() < grace_end:
@@ -164,4 +202,4 @@ def run_process_group(
         finally:
             _killpg(process.pid, signal.SIGKILL)
             status = process.wait()
-    return status, timed_out, time.monotonic() - start, None
+    return GroupRun(status, timed_out, time.monotonic() - start, None, cpu)

@@ -265,7 +265,7 @@ def test_a_passing_run_leaves_no_double_forked_daemon(tmp_path: Path, marker: st
 def test_run_process_group_kills_a_daemon_that_left_the_group(tmp_path: Path, marker: str) -> None:
     (tmp_path / "program.py").write_text(PROGRAM)
     argv = [sys.executable, str(tmp_path / "program.py"), str(tmp_path / "ready"), marker, "--daemon"]
-    status, timed_out, _, error = run_process_group(argv, tmp_path, dict(os.environ), tmp_path / "run.log", timeout=30)
+    status, timed_out, _, error, _ = run_process_group(argv, tmp_path, dict(os.environ), tmp_path / "run.log", timeout=30)
     assert (status, timed_out, error) == (0, False, None)
     assert (tmp_path / "ready").exists()
     assert_none_left(marker, seconds=0.5)

@@ -213,6 +213,11 @@ def store_artifacts(output: RunOutput, folder: Path | None, key: str) -> dict[st
     return {**output.record, "artifacts": artifacts}
 
 
+#: A timed-out run that had less than this share of one core over its wall time was stalled by
+#: the machine (a stopped process, a frozen VM, a throttled container), not too slow: a run
+#: too slow to finish uses its time (ORB-SLAM3 paced at the sensor rate: 0.4-1.5 cores).
+STALLED_CPU_SHARE = 0.25
+
 #: Words in a failure or log tail that say the run ran out of memory (Python, C++).
 _OUT_OF_MEMORY = ("MemoryError", "std::bad_alloc")
 
@@ -221,10 +226,14 @@ def machine_failure(result: RunResult, load: dict[str, Any]) -> str | None:
     """Why the machine, not the system, decided a failed run (it is then not cached), or ``None``.
 
     The rule: a run that timed out (``failure`` starts with "timed out") is the machine's when
-    it fell behind the sensor clock (``RunResult.fell_behind``: starved even re-paced) or the
-    machine was busier than its cores when it started (``load``, a ``machine_load()`` taken
-    before the run: 1-minute load average above the usable cores); a timeout on a quiet machine
-    is the system's (it is too slow) and is cached. A run killed by SIGKILL without a timeout
+    it fell behind the sensor clock (``RunResult.fell_behind``: starved even re-paced), when it
+    got less than ``STALLED_CPU_SHARE`` of a core over its time (``info["cpu_at_timeout_s"]``,
+    the CPU its processes had had at the deadline, against its wall time: it was stopped,
+    frozen or throttled, whatever the load average said), or when the machine was busier than
+    its cores when it started (``load``, a ``machine_load()`` taken before the run: 1-minute
+    load average above the usable cores); a timeout that used its time on a quiet machine is
+    the system's (it is too slow) and is cached. A system that hangs idle is thus not cached:
+    it costs its timeout again next session, never a wrong verdict. A run killed by SIGKILL without a timeout
     (the kernel's out-of-memory killer), or whose failure or log ends in ``MemoryError`` or
     ``std::bad_alloc``, ran out of memory: the machine's.
     """
@@ -234,6 +243,12 @@ def machine_failure(result: RunResult, load: dict[str, Any]) -> str | None:
     if failure.startswith("timed out"):
         if result.fell_behind:
             return f"timed out while starved: it fell behind the sensor clock ({result.load.get('fell_behind_reason')})"
+        cpu = result.info.get("cpu_at_timeout_s")
+        if cpu is not None and result.wall_time_s > 0 and cpu < STALLED_CPU_SHARE * result.wall_time_s:
+            return (
+                f"timed out while stalled: it had {cpu:.1f} s of CPU in its {result.wall_time_s:.1f} s "
+                f"(less than {STALLED_CPU_SHARE:g} of a core: stopped, frozen or throttled)"
+            )
         cores = int(load.get("usable_cpus") or load["cpus"])
         if float(load["loadavg"][0]) > cores:
             return f"timed out on a busy machine: load average {float(load['loadavg'][0]):.1f} on {cores} cores when it started"
