@@ -15,6 +15,7 @@ from typing import Any
 
 import pytest
 
+from pytest_sal.controller_lifeline import follow_controller
 from pytest_sal.engine.outcome import Outcome
 from pytest_sal.engine.quantity import num, with_unit
 from pytest_sal.engine.requirement_runner import failure_message
@@ -68,6 +69,8 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 def pytest_configure(config: pytest.Config) -> None:
     for line in MARKERS:
         config.addinivalue_line("markers", line)
+    if hasattr(config, "workerinput"):  # an xdist worker: it dies with its controller
+        follow_controller()
     session = SalSession(config)
     config.stash[SAL_SESSION] = session
     config.pluginmanager.register(session, "sal-session")  # collects outcomes from reports
