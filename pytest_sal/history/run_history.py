@@ -218,14 +218,21 @@ class History:
         found = self.baseline(outcome_key, ref)
         return None if found is None else found[1]
 
-    def baseline(self, outcome_key: OutcomeKey, ref: str | None = None) -> tuple[RunRecord, Outcome] | None:
-        """The run and outcome with ``outcome_key`` to compare with.
+    def baseline(self, outcome_key: OutcomeKey, ref: str | None = None, *, exclude: int | None = None) -> tuple[RunRecord, Outcome] | None:
+        """The run and outcome with ``outcome_key`` to compare with: the one rule of a test's
+        baseline, for the plugin's gate, its warm start and ``sal compare``.
+
+        The newest of the runs ``ref`` names that holds a readable outcome of the test; a run
+        that lacks the test (a ``-k`` run, a test that errored) or whose outcome was skipped as
+        unreadable is passed over for an older one, and the run being compared (``exclude``, a
+        run number) is never its own baseline.
 
         Args:
-            ref: ``None`` or ``"last"``: the newest run holding the key whose outcome did not
-                fail a regression gate (so rerunning a regressed commit compares with the last
-                good run, not with itself); a run number (``"0003"``), a run name or a commit
-                prefix: the newest of the runs it names that holds the key.
+            ref: ``None`` or ``"last"``: any run, and an outcome that failed a regression gate
+                is passed over too (so rerunning a regressed commit compares with the last good
+                run, not with itself); a run number (``"0003"``), a run name or a commit prefix:
+                the runs it names.
+            exclude: the number of the run being compared, when it is in the history.
 
         Returns:
             ``(run, outcome)``, or ``None`` when no (named) run holds the key.
@@ -237,7 +244,7 @@ class History:
         runs = self.runs() if last else self.find_runs(str(ref))
         for run in reversed(runs):
             outcome = run.get(outcome_key)
-            if outcome is not None and not (last and outcome.regression):
+            if run.number != exclude and outcome is not None and not (last and outcome.regression):
                 return run, outcome
         return None
 
