@@ -51,7 +51,7 @@ the paper's workflow, one YAML experiment (example_suites/configs/ has the table
 
 the regression gate, on the run history that pytest sessions write (.sal/history):
   sal history                                every test: latest boundary, change since the run before
-  sal compare main                           the last run against the baseline named main; exit 1 on a regression
+  sal compare main                           the last run against the baseline named main; exit 1 on a regression that fails
   sal history prune --keep 50                remove old runs (baselines are kept)
 
 Datasets are read in their own layouts (KITTI odometry, TUM RGB-D, EuRoC MAV, a folder of

@@ -18,6 +18,7 @@ from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
 from typing import Any, NoReturn
 
+from pytest_sal.engine.json_shape import nesting_problem, read_fields
 from pytest_sal.engine.legacy_units import upgrade_outcome
 from pytest_sal.engine.quantity import num, with_unit
 from sal_adapters.suggest import suggestion
@@ -424,17 +425,24 @@ class Outcome:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Outcome:
         """Inverse of ``to_dict``; an outcome stored in an older unit is converted
-        (``pytest_sal.engine.legacy_units``)."""
-        _check_numbers(data)
-        data = upgrade_outcome(dict(data))
-        data.pop("confidence", None)
-        data["boundary"] = Boundary(**data["boundary"])
-        data["previous"] = None if data.get("previous") is None else Boundary(**data["previous"])
-        data["trials"] = [Trial(**{k: v for k, v in t.items() if k != "repeat"}) for t in data.get("trials", [])]
-        for trial in data["trials"]:
-            trial.metrics = {k: None if isinstance(v, float) and not math.isfinite(v) else v for k, v in trial.metrics.items()}
-        data["criteria"] = [(str(m), str(op), float(v)) for m, op, v in data.get("criteria", [])]
-        return cls(**data)
+        (``pytest_sal.engine.legacy_units``).
+
+        Raises:
+            ValueError: ``data`` is not an outcome: a field missing or of another type, a number
+                not finite, nesting deeper than ``json_shape.MAX_NESTING`` (a hand-edited
+                history), naming the key. A non-finite metric reads as ``None``.
+        """
+        problem = nesting_problem(data)
+        if problem is not None:
+            raise ValueError(problem)
+        if not isinstance(data, dict) or not isinstance(data.get("boundary"), dict):
+            raise ValueError("not an outcome (no boundary)")
+        fields = upgrade_outcome(read_fields(cls, data))
+        fields["boundary"] = Boundary(**fields["boundary"])
+        fields["previous"] = None if fields.get("previous") is None else Boundary(**fields["previous"])
+        fields["trials"] = [Trial(**trial) for trial in fields.get("trials", [])]
+        fields["criteria"] = [tuple(criterion) for criterion in fields.get("criteria", [])]
+        return cls(**fields)
 
 
 def failures_first(outcomes: Iterable[Outcome]) -> list[Outcome]:
@@ -444,27 +452,3 @@ def failures_first(outcomes: Iterable[Outcome]) -> list[Outcome]:
     ``pytest -n`` workers finished the tests in."""
     ordered = sorted(outcomes, key=lambda o: (o.test_id, o.system, o.dataset))
     return [o for o in ordered if not o.passed] + [o for o in ordered if o.passed]
-
-
-def _check_numbers(data: Any) -> None:
-    """Refuse a stored outcome whose values and bounds are not finite numbers or null (a
-    hand-edited history: ``pass_value: "abc"`` or ``NaN``), naming the key: ``ValueError``.
-    Metrics are free-form (``failures`` is a list); a NaN metric is read as null."""
-    if not isinstance(data, dict) or not isinstance(data.get("boundary"), dict):
-        raise ValueError("not an outcome (no boundary)")
-    places: list[tuple[str, Any]] = [("edge", data.get("edge")), ("margin", data.get("margin"))]
-    for name in ("boundary", "previous"):
-        bounds = data.get(name) or {}
-        if not isinstance(bounds, dict):
-            raise ValueError(f"{name} is not a mapping")
-        places += [(f"{name}.{end}", bounds.get(end)) for end in ("pass_value", "fail_value")]
-    trials = data.get("trials") or []
-    if not isinstance(trials, list) or not all(isinstance(t, dict) for t in trials):
-        raise ValueError("trials is not a list of trials")
-    for i, trial in enumerate(trials):
-        places.append((f"trials[{i}].value", trial.get("value", "missing")))
-        if not isinstance(trial.get("metrics") or {}, dict):
-            raise ValueError(f"trials[{i}].metrics is not a mapping")
-    for key, value in places:
-        if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value)):
-            raise ValueError(f"{key} = {str(value)[:40]!r} is not a finite number")

@@ -3,8 +3,10 @@
 ``--sal-compare=REF`` names the baseline: a run name saved with ``--sal-save=NAME`` (the ini
 ``sal_baseline``, ``main`` by default, when no REF is given), a run number, a commit prefix, or
 ``last`` (the newest run whose outcome did not fail a gate, so rerunning a regressed commit
-compares with the last good run). A test with nothing to compare against is said so in its
-``comparison``; under ``--sal-compare-missing=fail`` it fails.
+compares with the last good run). Of the runs REF names, the newest that holds the test is its
+baseline (``History.baseline``). A test with nothing to compare against is said so in its
+``comparison``; under ``--sal-compare-missing=fail`` it fails. A regression is what
+``regression.judge`` finds; without ``--sal-compare-fail`` it is said, not failed.
 
 Also here: what a pytest argument list gets wrong before plugins load (``space_form_problem``).
 """
@@ -42,11 +44,13 @@ def compare_with_baseline(
     *,
     missing: str = "pass",
 ) -> Outcome:
-    """``outcome`` compared with the same test's outcome in the baseline ``ref``: sets
-    ``previous`` (the baseline's boundary), ``comparison`` (what it was compared with, or why
-    not) and ``regression`` (the failed ``checks``; with ``missing="fail"``, also a missing
-    baseline). Returns ``outcome``."""
-    from pytest_sal.history.regression import regressions
+    """``outcome`` compared with the same test's outcome in the baseline ``ref``
+    (``History.baseline``, the rule ``sal compare`` follows too): sets ``previous`` (the
+    baseline's boundary), ``comparison`` (what it was compared with, or why not, and, without
+    ``checks``, a regression the default check finds) and ``regression`` (the failed
+    ``checks``; with ``missing="fail"``, also a missing baseline). A worse verdict is not
+    repeated here: the test fails by its requirement. Returns ``outcome``."""
+    from pytest_sal.history.regression import DEFAULT_CHECKS, judge
     from pytest_sal.history.run_history import outcome_key
 
     try:
@@ -67,9 +71,10 @@ def compare_with_baseline(
         notes.append(f"on another machine: baseline {previous.machine}, this run {outcome.machine}")
     if previous.system_version and outcome.system_version and previous.system_version != outcome.system_version:
         notes.append(f"system {previous.system_version} -> {outcome.system_version}")
+    judgement = judge(outcome, previous, checks)
+    notes += [f"regressed (the default check {DEFAULT_CHECKS[0]}; --sal-compare-fail fails it): {said}" for said in judgement.said]
     outcome.comparison = "; ".join(notes)
-    found_regressions = regressions(checks, outcome, previous)
-    outcome.regression = "; ".join(found_regressions) if found_regressions else None
+    outcome.regression = "; ".join(judgement.failing) if judgement.failing else None
     return outcome
 
 

@@ -2,8 +2,13 @@
 
 ``--sal-compare-fail`` texts are parsed by ``parse_compare_fail`` into ``RegressionCheck``
 objects whose ``fails`` says, in words, how the boundary or a metric at the envelope's edge got
-worse than in the previous outcome (``History.previous``); ``warm_start`` turns the previous
+worse than in the previous outcome (``History.baseline``); ``warm_start`` turns the previous
 boundary into the first trials of the next search.
+
+``judge`` is the one rule of what a regression is, for the plugin's gate and ``sal compare``
+alike: a verdict worse than the baseline's, a check given that fails (these fail: pytest fails
+the test, ``sal compare`` exits 1), and, when no check is given, what ``DEFAULT_CHECKS`` find
+(said as a regression, failing nothing).
 """
 
 from __future__ import annotations
@@ -11,6 +16,7 @@ from __future__ import annotations
 import argparse
 import math
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -19,7 +25,19 @@ from pytest_sal.engine.quantity import with_unit
 from pytest_sal.engine.requirements import METRICS
 from sal_adapters.suggest import closest
 
-__all__ = ["BoundaryCheck", "MetricCheck", "RegressionCheck", "edge_trial", "parse_compare_fail", "regressions", "warm_start"]
+__all__ = [
+    "DEFAULT_CHECKS",
+    "VERDICT_RANK",
+    "BoundaryCheck",
+    "Judgement",
+    "MetricCheck",
+    "RegressionCheck",
+    "edge_trial",
+    "judge",
+    "parse_compare_fail",
+    "regressions",
+    "warm_start",
+]
 
 _EPS = 1e-9  # "more than the limit": a change equal to it (up to rounding) does not fail
 
@@ -220,6 +238,43 @@ def parse_compare_fail(text: str) -> RegressionCheck:
     return BoundaryCheck(limit, relative) if what == "boundary" else MetricCheck(what, limit, relative)
 
 
+@dataclass(frozen=True)
+class Judgement:
+    """A test's regressions against its baseline, in words (``judge``).
+
+    Attributes:
+        verdict: the verdict got worse (``passed in the baseline, failed now``), or ``None``;
+            under pytest the test fails by itself (its requirement is not met).
+        failing: the checks given that fail (``--sal-compare-fail``, ``sal compare --fail``).
+        said: without checks given, what ``DEFAULT_CHECKS`` find: a regression said, not failed.
+    """
+
+    verdict: str | None
+    failing: list[str]
+    said: list[str]
+
+    @property
+    def found(self) -> list[str]:
+        """Every regression, the verdict's first."""
+        return ([self.verdict] if self.verdict else []) + self.failing + self.said
+
+    @property
+    def fails(self) -> bool:
+        """A regression that fails: a worse verdict or a check given."""
+        return self.verdict is not None or bool(self.failing)
+
+
+def judge(current: Outcome, previous: Outcome, checks: Sequence[RegressionCheck], baseline: str = "the baseline") -> Judgement:
+    """``current`` against its baseline outcome ``previous`` (``History.baseline``): the one
+    rule of a regression, for the plugin's gate and ``sal compare``; ``baseline`` names it in
+    the verdict's message (``0001``)."""
+    worse = VERDICT_RANK.get(current.verdict, 2) > VERDICT_RANK.get(previous.verdict, 2)
+    verdict = f"{previous.verdict} in {baseline}, {current.verdict} now" if worse else None
+    if checks:
+        return Judgement(verdict, regressions(list(checks), current, previous), [])
+    return Judgement(verdict, [], regressions(list(DEFAULT_CHECKS), current, previous))
+
+
 def regressions(checks: list[RegressionCheck], current: Outcome, previous: Outcome | None) -> list[str]:
     """The messages of the ``checks`` that fail ``current`` against ``previous`` (none without
     a previous outcome)."""
@@ -238,6 +293,13 @@ def regressions(checks: list[RegressionCheck], current: Outcome, previous: Outco
             "save a new baseline with --sal-save"
         ]
     return [message for check in checks if (message := check.fails(current, previous)) is not None]
+
+
+#: what a regression is when no check is given (``--sal-compare`` alone, ``sal compare``
+#: without ``--fail``): said, never failing
+DEFAULT_CHECKS: tuple[RegressionCheck, ...] = (BoundaryCheck(10.0, True),)
+#: ``Outcome.verdict`` from best to worst (an unknown verdict counts as failed)
+VERDICT_RANK = {"passed": 0, "inconclusive": 1, "flaky": 1, "failed": 2}
 
 
 def warm_start(

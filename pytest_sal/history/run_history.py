@@ -34,6 +34,7 @@ from typing import Any
 
 from pytest_sal.engine.outcome import Outcome
 from pytest_sal.history.provenance import commit_info, machine_info
+from pytest_sal.history.run_file import FORMAT_VERSION, read_document, read_outcomes
 from sal_adapters.errors import SalError
 from sal_adapters.json_values import json_safe
 from sal_adapters.textfiles import atomic_write_text
@@ -49,8 +50,6 @@ __all__ = [
 
 #: where runs are kept unless configured otherwise (relative to the working directory)
 DEFAULT_ROOT = Path(".sal/history")
-#: the ``version`` written into every run file
-FORMAT_VERSION = 1
 #: identifies an outcome across runs
 OutcomeKey = tuple[str, str, str]
 
@@ -219,14 +218,21 @@ class History:
         found = self.baseline(outcome_key, ref)
         return None if found is None else found[1]
 
-    def baseline(self, outcome_key: OutcomeKey, ref: str | None = None) -> tuple[RunRecord, Outcome] | None:
-        """The run and outcome with ``outcome_key`` to compare with.
+    def baseline(self, outcome_key: OutcomeKey, ref: str | None = None, *, exclude: int | None = None) -> tuple[RunRecord, Outcome] | None:
+        """The run and outcome with ``outcome_key`` to compare with: the one rule of a test's
+        baseline, for the plugin's gate, its warm start and ``sal compare``.
+
+        The newest of the runs ``ref`` names that holds a readable outcome of the test; a run
+        that lacks the test (a ``-k`` run, a test that errored) or whose outcome was skipped as
+        unreadable is passed over for an older one, and the run being compared (``exclude``, a
+        run number) is never its own baseline.
 
         Args:
-            ref: ``None`` or ``"last"``: the newest run holding the key whose outcome did not
-                fail a regression gate (so rerunning a regressed commit compares with the last
-                good run, not with itself); a run number (``"0003"``), a run name or a commit
-                prefix: the newest of the runs it names that holds the key.
+            ref: ``None`` or ``"last"``: any run, and an outcome that failed a regression gate
+                is passed over too (so rerunning a regressed commit compares with the last good
+                run, not with itself); a run number (``"0003"``), a run name or a commit prefix:
+                the runs it names.
+            exclude: the number of the run being compared, when it is in the history.
 
         Returns:
             ``(run, outcome)``, or ``None`` when no (named) run holds the key.
@@ -238,7 +244,7 @@ class History:
         runs = self.runs() if last else self.find_runs(str(ref))
         for run in reversed(runs):
             outcome = run.get(outcome_key)
-            if outcome is not None and not (last and outcome.regression):
+            if run.number != exclude and outcome is not None and not (last and outcome.regression):
                 return run, outcome
         return None
 
@@ -298,36 +304,23 @@ def _created(run: RunRecord) -> datetime:
 
 
 def _read_run(path: Path) -> RunRecord | None:
+    """The run at ``path``, or ``None`` with a warning naming the file and what is wrong
+    (``run_file``: an outcome that is wrong is left out of the run instead)."""
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-        if data.get("version") != FORMAT_VERSION:
-            raise ValueError(f"format version {data.get('version')!r}, this pytest-sal reads {FORMAT_VERSION}")
-        return RunRecord(
-            number=int(path.name.split("_")[0]),
-            path=path,
-            created=str(data.get("created", "")),
-            commit=str(data.get("commit") or ""),
-            dirty=bool(data.get("dirty", False)),
-            machine=dict(data.get("machine") or {}),
-            name=data.get("name"),
-            outcomes=_readable_outcomes(path, data.get("outcomes", [])),
-        )
-    except (OSError, ValueError, TypeError, KeyError, AttributeError) as exc:
+        data = read_document(path)
+    except (OSError, ValueError) as exc:
         warnings.warn(f"{path}: not a readable pytest-sal run, skipped ({exc})", stacklevel=3)
         return None
-
-
-def _readable_outcomes(path: Path, stored: list[Any]) -> list[Outcome]:
-    """The run's outcomes; one that is not readable (a number edited into text or NaN) is
-    skipped with a warning naming the file, the test and the key, the others are kept."""
-    outcomes = []
-    for number, data in enumerate(stored, 1):
-        try:
-            outcomes.append(Outcome.from_dict(data))
-        except (ValueError, TypeError, KeyError, AttributeError) as exc:
-            test = data.get("test_id", "?") if isinstance(data, dict) else "?"
-            warnings.warn(f"{path}: outcome {number} ({test}) skipped: {exc}", stacklevel=4)
-    return outcomes
+    return RunRecord(
+        number=int(path.name.split("_")[0]),
+        path=path,
+        created=data["created"],
+        commit=data["commit"] or "",
+        dirty=data["dirty"],
+        machine=data["machine"],
+        name=data["name"],
+        outcomes=read_outcomes(path, data["outcomes"]),
+    )
 
 
 def _safe_name(name: str) -> str:
