@@ -1,6 +1,7 @@
 """Cache entries that heal (issue 12, point 5): each attack on a stored trial run or cached frame
 ends in one CacheWarning naming the entry and a recomputed, identical result; a read-only cache
-serves what it holds; a failure the machine decided is not stored."""
+serves what it holds, and a cache on a full disk costs the cache, not the verdict (issue 23,
+item 5); a failure the machine decided is not stored."""
 
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from faults import refuse_writes_under, stamps
+from faults import fill_disk_under, refuse_writes_under, stamps
 
 from pytest_sal import tracking_rate
 from pytest_sal.engine.requirements import Requirement
@@ -193,11 +194,59 @@ def test_a_read_only_cache_serves_its_entries_and_stores_nothing(tmp_path: Path,
     assert folder_miss[1] is False and (folder_miss[0] / "g.png").read_bytes() == b"new" and root not in folder_miss[0].parents
     assert (
         messages[0]
-        == f"the cache at {root} is read-only (Read-only file system): the entries it holds are used, new results are computed and not stored"
+        == f"the cache at {root} cannot be written (Read-only file system): the entries it holds are used, new results are computed and not stored"
     )
-    assert len(messages) == 2 and messages[1].startswith(f"{cache.path(cache_key(n=9))}: bad cache entry, ignored (the cache is read-only)")
-    assert cache.read_only == "Read-only file system" and cache.get(cache_key(n=1)) == {"ate": 0.5}
+    assert len(messages) == 2 and messages[1].startswith(
+        f"{cache.path(cache_key(n=9))}: bad cache entry, ignored (the cache cannot be written)"
+    )
+    assert cache.unwritable == "Read-only file system" and cache.get(cache_key(n=1)) == {"ate": 0.5}
     assert stamps(root) == before  # nothing written, removed or touched
+
+
+FULL = "cannot be written (No space left on device): the entries it holds are used, new results are computed and not stored"
+
+
+def leftovers(root: Path) -> list[Path]:
+    """Temporary files and folders of writes that failed."""
+    return [p for p in root.rglob("*") if p.name.startswith(".tmp-") or ".tmp" in p.suffixes or ".sal-tmp" in p.name]
+
+
+def test_a_new_cache_on_a_full_disk_costs_the_cache_not_the_verdict(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    log = tmp_path / "calls.jsonl"
+    root = tmp_path / "cache"
+    fill_disk_under(root, monkeypatch.setattr)
+    session = runner(tmp_path, FakeSlam(calls_file=str(log)))
+    (holds, fails), messages = cache_warnings(lambda: (session.evaluate(40.0), session.evaluate(10.0)))
+    assert holds.passed and not fails.passed and not holds.cached and not fails.cached
+    assert messages == [f"the cache at {root} {FULL}"]
+    assert not [p for p in root.rglob("*") if p.is_file()]  # no entry, no .gitignore, nothing half-written
+    assert session.cache is not None and session.cache.unwritable == "No space left on device"
+
+    monkeypatch.undo()  # room again: the next session stores its results
+    again, messages = cache_warnings(lambda: runner(tmp_path, FakeSlam(calls_file=str(log))).evaluate(10.0))
+    assert messages == [] and not again.passed and calls(log) == 3
+    assert (root / ".gitignore").is_file() and runner(tmp_path, FakeSlam(calls_file=str(log))).evaluate(10.0).cached
+
+
+def test_a_cache_that_fills_up_serves_what_it_holds_and_stores_nothing_more(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    root = tmp_path / "cache"
+    cache = ContentCache(root)
+    cache.put(cache_key(n=1), {"ate": 0.5})
+    fill_disk_under(root, monkeypatch.setattr)
+
+    def rest_of_session() -> list[object]:
+        return [
+            cache.compute(cache_key(n=2), lambda: {"ate": 0.2}),
+            cache.put(cache_key(n=3), {"ate": 0.3}),
+            cache.compute_dir(cache_key(n=4), lambda folder: (folder / "f.png").write_bytes(b"png")),
+            cache.compute(cache_key(n=1), lambda: {"ate": 7.0}),
+        ]
+
+    (miss, _, (folder, folder_cached), hit), messages = cache_warnings(rest_of_session)
+    assert miss == ({"ate": 0.2}, False) and hit == ({"ate": 0.5}, True)
+    assert not folder_cached and (folder / "f.png").read_bytes() == b"png" and root not in folder.parents
+    assert messages == [f"the cache at {root} {FULL}"]
+    assert cache.stats()["entries"] == 1 and not leftovers(root)
 
 
 class Failing(FakeSlam):
