@@ -1,5 +1,6 @@
 """Cache entries that heal (issue 12, point 5): each attack on a stored trial run or cached frame
-ends in one CacheWarning naming the entry and a recomputed, identical result; a read-only cache
+(also a valid entry of another trial copied under its key, issue 23, item 6) ends in one
+CacheWarning naming the entry and a recomputed, identical result; a read-only cache
 serves what it holds, and a cache on a full disk costs the cache, not the verdict (issue 23,
 item 5); a failure the machine decided is not stored."""
 
@@ -58,8 +59,16 @@ def calls(path: Path) -> int:
     return len(path.read_text().splitlines()) if path.exists() else 0
 
 
-def repacked(data: dict[str, Any]) -> bytes:
-    """An entry holding ``data`` with a checksum that matches (a forger's edit)."""
+def repacked(raw: bytes, data: dict[str, Any]) -> bytes:
+    """The entry ``raw`` holding ``data`` instead, with a checksum that matches (a forger's edit)."""
+    key = json.loads(raw)["key"]
+    signed = json.dumps({"data": data, "key": key}, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
+    return json.dumps({"sha256": hashlib.sha256(signed.encode()).hexdigest(), "key": key, "data": data}).encode()
+
+
+def keyless(raw: bytes) -> bytes:
+    """The entry ``raw`` in the format before entries named their key: its checksum covers only its data."""
+    data = json.loads(raw)["data"]
     payload = json.dumps(data, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
     return json.dumps({"sha256": hashlib.sha256(payload.encode()).hexdigest(), "data": data}).encode()
 
@@ -77,7 +86,7 @@ def forged(field: str, value: Any) -> Callable[[bytes], bytes]:
     def edit(raw: bytes) -> bytes:
         data = json.loads(raw)["data"]
         data["metrics"][field] = value
-        return repacked(data)
+        return repacked(raw, data)
 
     return edit
 
@@ -90,11 +99,16 @@ ATTACKS: dict[str, tuple[Callable[[bytes], bytes], str]] = {
     "ATE edited to 99": (edited("ate_rmse", 99.0), "checksum mismatch"),
     "ATE edited to NaN": (edited("ate_rmse", math.nan), "checksum mismatch"),
     "tracking rate edited to 1": (edited("tracking_rate", 1.0), "checksum mismatch"),
-    "{} with its checksum": (lambda raw: repacked({}), "no 'metrics' object"),
+    "{} with its checksum": (lambda raw: repacked(raw, {}), "no 'metrics' object"),
     "NaN with its checksum": (forged("ate_rmse", math.nan), "metrics.ate_rmse is nan, not a finite number or null"),
     "text with its checksum": (forged("tracking_rate", "0.9"), "metrics.tracking_rate is '0.9'"),
-    "metric dropped, with its checksum": (lambda raw: repacked({**json.loads(raw)["data"], "metrics": {}}), "metrics.ate_rmse is missing"),
+    "metric dropped, with its checksum": (
+        lambda raw: repacked(raw, {**json.loads(raw)["data"], "metrics": {}}),
+        "metrics.ate_rmse is missing",
+    ),
     "starved as text, with its checksum": (forged("starved", "no"), "metrics.starved is not true or false"),
+    "key edited": (lambda raw: raw.replace(json.loads(raw)["key"].encode(), b"0" * 64), "checksum mismatch"),
+    "no key (the format before issue 23)": (keyless, "names no key (written before pytest-sal entries named their key"),
 }
 
 
@@ -112,6 +126,19 @@ def test_an_attacked_trial_entry_is_discarded_and_run_again(tmp_path: Path, atta
     assert calls(log) == 2 and not again.cached and again.metrics == first.metrics and again.passed == first.passed
     healed, messages = cache_warnings(lambda: runner(tmp_path, FakeSlam(calls_file=str(log))).evaluate(20.0))
     assert messages == [] and healed.cached and healed.metrics == first.metrics and calls(log) == 2
+
+
+def test_a_valid_entry_copied_under_another_key_is_not_served(tmp_path: Path) -> None:
+    log = tmp_path / "calls.jsonl"
+    first = runner(tmp_path, FakeSlam(calls_file=str(log)))
+    holds, fails = first.evaluate(40.0), first.evaluate(10.0)
+    assert holds.passed and not fails.passed
+    entry = first.cache.path(first.key(10.0, 0))
+    entry.write_bytes(first.cache.path(first.key(40.0, 0)).read_bytes())  # the passing trial's entry, checksum and all
+    again, messages = cache_warnings(lambda: runner(tmp_path, FakeSlam(calls_file=str(log))).evaluate(10.0))
+    assert not again.passed and not again.cached and again.metrics == fails.metrics and calls(log) == 3
+    assert len(messages) == 1 and messages[0].startswith(f"{entry}: bad cache entry, removed and computed again: it is the entry of key ")
+    assert f"not of {first.key(10.0, 0)[:12]}... (copied from another entry)" in messages[0]
 
 
 def foggy_room() -> Sequence:

@@ -157,7 +157,7 @@ class CacheFolder:
             fill(work / FILES)
             if not (work / FILES).is_dir():
                 raise CacheError(f"compute_dir: the function removed its output folder {work / FILES}", files)
-            (work / MANIFEST).write_bytes(pack_entry({"files": file_listing(work / FILES, hashes=True)}))  # last
+            (work / MANIFEST).write_bytes(pack_entry(key, {"files": file_listing(work / FILES, hashes=True)}))  # last
             os.rename(work, files.parent)
             self.touch(files.parent)
         finally:

@@ -17,14 +17,15 @@ Every entry appears by one ``os.replace``/``rename`` of a finished temporary sib
 see a whole entry or none. Reads set the entry's modification time, and :meth:`ContentCache.evict`
 removes the least recently used entries first.
 
-Entries check themselves (checksums, a folder's manifest). Every read checks the checksum and the reader's own
+Entries check themselves (checksums, a folder's manifest) and name the key they were stored
+under, inside what the checksum covers. Every read checks the checksum, the key and the reader's own
 ``check`` of the data's shape; every use of a folder entry compares the files' names and sizes
 with the manifest, and its first use by a :class:`ContentCache` object (once a session) also
-their SHA-256. An entry that is not UTF-8, not JSON, has no checksum, does not match it, fails
-``check`` or has a damaged file is never served: it is removed under its key's lock and
-computed again, with one :class:`CacheWarning` naming it and what was wrong. Entries written
-before checksums existed are such entries (trial runs changed keys instead, see
-``pytest_sal.engine.trial_runner.RUNNER_VERSION``). A ``compute`` whose ``transient`` hook gives a reason is
+their SHA-256. An entry that is not UTF-8, not JSON, has no checksum, does not match it, is
+another key's (a valid entry copied), fails ``check`` or has a damaged file is never served: it
+is removed under its key's lock and computed again, with one :class:`CacheWarning` naming it and
+what was wrong. Entries written before checksums or keys existed are such entries (trial runs
+changed keys instead, see ``pytest_sal.engine.trial_runner.RUNNER_VERSION``). A ``compute`` whose ``transient`` hook gives a reason is
 returned and not stored (a run the machine decided).
 
 A cache that cannot be written (a read-only mount, a folder this user cannot write, a full disk
@@ -313,7 +314,7 @@ class ContentCache:
         if not isinstance(data, Mapping):
             raise CacheError(f"cache entry {key[:12]}...: expected a dict, got a {type(data).__name__}", path)
         try:
-            raw = pack_entry(data)
+            raw = pack_entry(key, data)
         except (TypeError, ValueError) as exc:
             raise CacheError(f"cache entry {key[:12]}... is not JSON-ready: {exc}", path) from None
         return raw, json.loads(raw)["data"]
@@ -330,7 +331,7 @@ class ContentCache:
             raise CacheError("not a folder; choose another cache folder", self.root) from None
         except OSError as exc:
             return None, f"cannot read it ({exc.strerror})"
-        data, problem = unpack_entry(raw)
+        data, problem = unpack_entry(raw, key)
         if data is not None and check is not None:
             problem = check(data)
         if problem is not None:
@@ -363,7 +364,7 @@ class ContentCache:
             return False, f"no {MANIFEST} (written before pytest-sal checked its entries, or a damaged entry)"
         except OSError as exc:
             return False, f"cannot read {MANIFEST} ({exc.strerror})"
-        manifest, problem = unpack_entry(raw)
+        manifest, problem = unpack_entry(raw, key)
         if manifest is None:
             return False, f"{MANIFEST}: {problem}"
         try:
