@@ -120,10 +120,12 @@ def test_a_full_disk_under_the_cache_costs_the_cache_not_the_verdicts(pytester: 
     conftest = pytester.path / "conftest.py"
     conftest.write_text(conftest.read_text() + FULL_CACHE)
 
-    result = run(pytester, ["-p", "no:xdist"], "-W", "always")  # a subprocess: the patch dies with it
+    html = pytester.path / "html"  # its trials' report images go to the cache: refused too
+    result = run(pytester, ["-p", "no:xdist"], "-W", "always", f"--sal-report-html={html}")  # a subprocess: the patch dies with it
 
     result.assert_outcomes(passed=1, failed=1)  # test_thick_fog's requirement fails, as without a cache
     text, cache = output(result), pytester.path / "cache"
     assert "Traceback" not in text and "CacheError" not in text and "Errno" not in text, text
     assert text.count(f"the cache at {cache} cannot be written (No space left on device): ") == 1, text
-    assert not [p for p in cache.rglob("*") if p.is_file()]  # no entry, no .gitignore, no temporary file
+    assert not [p for p in cache.rglob("*") if p.is_file()]  # no entry, no image, no .gitignore, no temporary file
+    assert (html / "index.html").is_file()  # the report, without the images

@@ -349,8 +349,7 @@ class TrialRunner:
             frames_cache=self.cache.root if self.cache_frames and self.cache is not None else None,
             stop=stop,
         )
-        folder = self.cache.root / "artifacts" if job.artifacts and self.cache is not None else None
-        return store_artifacts(self.executor.run(job), folder, key)
+        return store_artifacts(self.executor.run(job), self.cache if job.artifacts else None, key)
 
 
 def _not_cached(record: dict[str, Any]) -> str | None:

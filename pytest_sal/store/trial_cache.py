@@ -59,6 +59,7 @@ from pytest_sal.store.cache_keys import CacheError
 from pytest_sal.store.entry_format import MANIFEST, file_listing, listing_mismatch, pack_entry, unpack_entry
 from sal_adapters.errors import CacheWarning
 from sal_adapters.file_lock import FileLock
+from sal_adapters.textfiles import atomic_write
 
 __all__ = [
     "DEFAULT_CACHE_DIR",
@@ -218,6 +219,16 @@ class ContentCache:
         self._evict_if_bounded()
         return files, False
 
+    # ---- report images
+
+    def put_artifact(self, name: str, data: bytes) -> Path | None:
+        """Write ``data`` (a report image) to ``artifacts/<name>`` atomically and return its path;
+        ``None`` in a cache that cannot be written (nothing of it is left)."""
+        path = self.root / "artifacts" / name
+        if self._ensure_root() and self._store(functools.partial(atomic_write, path, lambda handle: handle.write(data), binary=True)):
+            return path
+        return None
+
     # ---- locking
 
     def lock(self, key: str) -> FileLock:
@@ -285,10 +296,12 @@ class ContentCache:
         self._ready = True
         return True
 
-    def _store(self, write: Callable[[], None]) -> bool:
-        """``write()`` into the cache (an entry: the caller holds its key's lock); False when the
-        file system refused it (``write_refused``): the writers leave nothing, and the cache
-        stores nothing more (warned once)."""
+    def _store(self, write: Callable[[], object]) -> bool:
+        """``write()`` into the cache (an entry under its key's lock, or a report image); False
+        when the cache cannot be written, or the file system refused this write (``write_refused``):
+        the writers leave nothing, and the cache stores nothing more (warned once)."""
+        if self.unwritable is not None:
+            return False
         try:
             write()
         except OSError as exc:
