@@ -4,7 +4,7 @@
 message without a traceback. ``DatasetError`` names the file (and line) that is wrong;
 ``WriteError`` the file or folder that could not be written. ``CacheWarning`` says that a
 damaged cache entry (a stored frame of the synthetic world, a trial result) was discarded and
-computed again, or that a cache is read-only.
+computed again, or that a cache cannot be written (read-only, full).
 """
 
 from __future__ import annotations
@@ -57,4 +57,4 @@ class DatasetWarning(UserWarning):
 
 
 class CacheWarning(UserWarning):
-    """A bad cache entry was discarded (it is computed again), or the cache is read-only."""
+    """A bad cache entry was discarded (it is computed again), or the cache cannot be written (read-only, full)."""

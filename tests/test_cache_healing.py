@@ -1,6 +1,8 @@
 """Cache entries that heal (issue 12, point 5): each attack on a stored trial run or cached frame
-ends in one CacheWarning naming the entry and a recomputed, identical result; a read-only cache
-serves what it holds; a failure the machine decided is not stored."""
+(also a valid entry of another trial copied under its key, issue 23, item 6) ends in one
+CacheWarning naming the entry and a recomputed, identical result; a read-only cache
+serves what it holds, and a cache on a full disk costs the cache, not the verdict (issue 23,
+item 5); a failure the machine decided is not stored."""
 
 from __future__ import annotations
 
@@ -15,7 +17,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from faults import refuse_writes_under, stamps
+from faults import fill_disk_under, refuse_writes_under, stamps
 
 from pytest_sal import tracking_rate
 from pytest_sal.engine.requirements import Requirement
@@ -57,8 +59,16 @@ def calls(path: Path) -> int:
     return len(path.read_text().splitlines()) if path.exists() else 0
 
 
-def repacked(data: dict[str, Any]) -> bytes:
-    """An entry holding ``data`` with a checksum that matches (a forger's edit)."""
+def repacked(raw: bytes, data: dict[str, Any]) -> bytes:
+    """The entry ``raw`` holding ``data`` instead, with a checksum that matches (a forger's edit)."""
+    key = json.loads(raw)["key"]
+    signed = json.dumps({"data": data, "key": key}, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
+    return json.dumps({"sha256": hashlib.sha256(signed.encode()).hexdigest(), "key": key, "data": data}).encode()
+
+
+def keyless(raw: bytes) -> bytes:
+    """The entry ``raw`` in the format before entries named their key: its checksum covers only its data."""
+    data = json.loads(raw)["data"]
     payload = json.dumps(data, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
     return json.dumps({"sha256": hashlib.sha256(payload.encode()).hexdigest(), "data": data}).encode()
 
@@ -76,7 +86,7 @@ def forged(field: str, value: Any) -> Callable[[bytes], bytes]:
     def edit(raw: bytes) -> bytes:
         data = json.loads(raw)["data"]
         data["metrics"][field] = value
-        return repacked(data)
+        return repacked(raw, data)
 
     return edit
 
@@ -89,11 +99,16 @@ ATTACKS: dict[str, tuple[Callable[[bytes], bytes], str]] = {
     "ATE edited to 99": (edited("ate_rmse", 99.0), "checksum mismatch"),
     "ATE edited to NaN": (edited("ate_rmse", math.nan), "checksum mismatch"),
     "tracking rate edited to 1": (edited("tracking_rate", 1.0), "checksum mismatch"),
-    "{} with its checksum": (lambda raw: repacked({}), "no 'metrics' object"),
+    "{} with its checksum": (lambda raw: repacked(raw, {}), "no 'metrics' object"),
     "NaN with its checksum": (forged("ate_rmse", math.nan), "metrics.ate_rmse is nan, not a finite number or null"),
     "text with its checksum": (forged("tracking_rate", "0.9"), "metrics.tracking_rate is '0.9'"),
-    "metric dropped, with its checksum": (lambda raw: repacked({**json.loads(raw)["data"], "metrics": {}}), "metrics.ate_rmse is missing"),
+    "metric dropped, with its checksum": (
+        lambda raw: repacked(raw, {**json.loads(raw)["data"], "metrics": {}}),
+        "metrics.ate_rmse is missing",
+    ),
     "starved as text, with its checksum": (forged("starved", "no"), "metrics.starved is not true or false"),
+    "key edited": (lambda raw: raw.replace(json.loads(raw)["key"].encode(), b"0" * 64), "checksum mismatch"),
+    "no key (the format before issue 23)": (keyless, "names no key (written before pytest-sal entries named their key"),
 }
 
 
@@ -111,6 +126,19 @@ def test_an_attacked_trial_entry_is_discarded_and_run_again(tmp_path: Path, atta
     assert calls(log) == 2 and not again.cached and again.metrics == first.metrics and again.passed == first.passed
     healed, messages = cache_warnings(lambda: runner(tmp_path, FakeSlam(calls_file=str(log))).evaluate(20.0))
     assert messages == [] and healed.cached and healed.metrics == first.metrics and calls(log) == 2
+
+
+def test_a_valid_entry_copied_under_another_key_is_not_served(tmp_path: Path) -> None:
+    log = tmp_path / "calls.jsonl"
+    first = runner(tmp_path, FakeSlam(calls_file=str(log)))
+    holds, fails = first.evaluate(40.0), first.evaluate(10.0)
+    assert holds.passed and not fails.passed
+    entry = first.cache.path(first.key(10.0, 0))
+    entry.write_bytes(first.cache.path(first.key(40.0, 0)).read_bytes())  # the passing trial's entry, checksum and all
+    again, messages = cache_warnings(lambda: runner(tmp_path, FakeSlam(calls_file=str(log))).evaluate(10.0))
+    assert not again.passed and not again.cached and again.metrics == fails.metrics and calls(log) == 3
+    assert len(messages) == 1 and messages[0].startswith(f"{entry}: bad cache entry, removed and computed again: it is the entry of key ")
+    assert f"not of {first.key(10.0, 0)[:12]}... (copied from another entry)" in messages[0]
 
 
 def foggy_room() -> Sequence:
@@ -193,11 +221,59 @@ def test_a_read_only_cache_serves_its_entries_and_stores_nothing(tmp_path: Path,
     assert folder_miss[1] is False and (folder_miss[0] / "g.png").read_bytes() == b"new" and root not in folder_miss[0].parents
     assert (
         messages[0]
-        == f"the cache at {root} is read-only (Read-only file system): the entries it holds are used, new results are computed and not stored"
+        == f"the cache at {root} cannot be written (Read-only file system): the entries it holds are used, new results are computed and not stored"
     )
-    assert len(messages) == 2 and messages[1].startswith(f"{cache.path(cache_key(n=9))}: bad cache entry, ignored (the cache is read-only)")
-    assert cache.read_only == "Read-only file system" and cache.get(cache_key(n=1)) == {"ate": 0.5}
+    assert len(messages) == 2 and messages[1].startswith(
+        f"{cache.path(cache_key(n=9))}: bad cache entry, ignored (the cache cannot be written)"
+    )
+    assert cache.unwritable == "Read-only file system" and cache.get(cache_key(n=1)) == {"ate": 0.5}
     assert stamps(root) == before  # nothing written, removed or touched
+
+
+FULL = "cannot be written (No space left on device): the entries it holds are used, new results are computed and not stored"
+
+
+def leftovers(root: Path) -> list[Path]:
+    """Temporary files and folders of writes that failed."""
+    return [p for p in root.rglob("*") if p.name.startswith(".tmp-") or ".tmp" in p.suffixes or ".sal-tmp" in p.name]
+
+
+def test_a_new_cache_on_a_full_disk_costs_the_cache_not_the_verdict(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    log = tmp_path / "calls.jsonl"
+    root = tmp_path / "cache"
+    fill_disk_under(root, monkeypatch.setattr)
+    session = runner(tmp_path, FakeSlam(calls_file=str(log)))
+    (holds, fails), messages = cache_warnings(lambda: (session.evaluate(40.0), session.evaluate(10.0)))
+    assert holds.passed and not fails.passed and not holds.cached and not fails.cached
+    assert messages == [f"the cache at {root} {FULL}"]
+    assert not [p for p in root.rglob("*") if p.is_file()]  # no entry, no .gitignore, nothing half-written
+    assert session.cache is not None and session.cache.unwritable == "No space left on device"
+
+    monkeypatch.undo()  # room again: the next session stores its results
+    again, messages = cache_warnings(lambda: runner(tmp_path, FakeSlam(calls_file=str(log))).evaluate(10.0))
+    assert messages == [] and not again.passed and calls(log) == 3
+    assert (root / ".gitignore").is_file() and runner(tmp_path, FakeSlam(calls_file=str(log))).evaluate(10.0).cached
+
+
+def test_a_cache_that_fills_up_serves_what_it_holds_and_stores_nothing_more(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    root = tmp_path / "cache"
+    cache = ContentCache(root)
+    cache.put(cache_key(n=1), {"ate": 0.5})
+    fill_disk_under(root, monkeypatch.setattr)
+
+    def rest_of_session() -> list[object]:
+        return [
+            cache.compute(cache_key(n=2), lambda: {"ate": 0.2}),
+            cache.put(cache_key(n=3), {"ate": 0.3}),
+            cache.compute_dir(cache_key(n=4), lambda folder: (folder / "f.png").write_bytes(b"png")),
+            cache.compute(cache_key(n=1), lambda: {"ate": 7.0}),
+        ]
+
+    (miss, _, (folder, folder_cached), hit), messages = cache_warnings(rest_of_session)
+    assert miss == ({"ate": 0.2}, False) and hit == ({"ate": 0.5}, True)
+    assert not folder_cached and (folder / "f.png").read_bytes() == b"png" and root not in folder.parents
+    assert messages == [f"the cache at {root} {FULL}"]
+    assert cache.stats()["entries"] == 1 and not leftovers(root)
 
 
 class Failing(FakeSlam):

@@ -2,12 +2,17 @@
 makes every write under the history folder and the HTML report folder fail with ENOSPC. The
 session still prints its results and its robustness table, exits with the tests' status, says in
 one line per output which path could not be written and why, and writes the outputs it can
-(the Markdown report); the next session, with room again, saves its history."""
+(the Markdown report); the next session, with room again, saves its history.
+
+A full disk under the trial cache (issue 23, item 5) costs the cache alone: every test gets
+its verdict, one warning names the cache folder and why, and nothing is left in it."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
-from plugin_suites import CONFTEST, HEADER, SMALL_DATASET, output, write_tracked
+from plugin_suites import CONFTEST, HEADER, SMALL_DATASET, output, project, run, write_tracked
 
 #: every atomic write below a folder named in FULL fails like write(2) on a full disk
 FULL_DISK = """
@@ -87,3 +92,40 @@ def test_a_full_disk_at_session_end_costs_only_the_outputs_it_hits(pytester: pyt
         "pytest-sal: wrote md/report.md",
     ]
     assert len(list(history.glob("*.json"))) == 1 and (html / "index.html").is_file()
+
+
+#: the inner session's cache lies on a full disk (files are created, their bytes refused)
+FULL_CACHE = f"""
+import sys
+sys.path.insert(0, {str(Path(__file__).parent)!r})
+from faults import fill_disk_under
+fill_disk_under(HERE / "cache")
+"""
+
+CACHED_TESTS = """
+
+@sal.require(tracking_rate >= 0.5, fog.visibility_m >= 25)
+def test_fog(sal_outcome):
+    pass
+
+
+@sal.require(tracking_rate >= 0.5, fog.visibility_m >= 5)
+def test_thick_fog(sal_outcome):
+    pass
+"""
+
+
+def test_a_full_disk_under_the_cache_costs_the_cache_not_the_verdicts(pytester: pytest.Pytester) -> None:
+    project(pytester, CACHED_TESTS)
+    conftest = pytester.path / "conftest.py"
+    conftest.write_text(conftest.read_text() + FULL_CACHE)
+
+    html = pytester.path / "html"  # its trials' report images go to the cache: refused too
+    result = run(pytester, ["-p", "no:xdist"], "-W", "always", f"--sal-report-html={html}")  # a subprocess: the patch dies with it
+
+    result.assert_outcomes(passed=1, failed=1)  # test_thick_fog's requirement fails, as without a cache
+    text, cache = output(result), pytester.path / "cache"
+    assert "Traceback" not in text and "CacheError" not in text and "Errno" not in text, text
+    assert text.count(f"the cache at {cache} cannot be written (No space left on device): ") == 1, text
+    assert not [p for p in cache.rglob("*") if p.is_file()]  # no entry, no image, no .gitignore, no temporary file
+    assert (html / "index.html").is_file()  # the report, without the images

@@ -199,17 +199,16 @@ def _scored_record(
     return record, scored
 
 
-def store_artifacts(output: RunOutput, folder: Path | None, key: str) -> dict[str, Any]:
-    """The run record of ``output`` with its report images written under ``folder`` as
-    ``<key>.png`` (the frame) and ``<key>-trajectory.png``, named in ``artifacts`` (none when
-    ``folder`` is ``None``)."""
+def store_artifacts(output: RunOutput, cache: ContentCache | None, key: str) -> dict[str, Any]:
+    """The run record of ``output`` with its report images written into ``cache``
+    (``ContentCache.put_artifact``) as ``<key>.png`` (the frame) and ``<key>-trajectory.png``,
+    named in ``artifacts`` (none when ``cache`` is ``None``, nor those it cannot write)."""
     artifacts: dict[str, str] = {}
-    if folder is not None:
-        folder.mkdir(parents=True, exist_ok=True)
+    if cache is not None:
         for name, data in sorted(output.images.items()):
-            path = folder / (f"{key}.png" if name == "frame" else f"{key}-{name}.png")
-            path.write_bytes(data)
-            artifacts[name] = str(path)
+            path = cache.put_artifact(f"{key}.png" if name == "frame" else f"{key}-{name}.png", data)
+            if path is not None:
+                artifacts[name] = str(path)
     return {**output.record, "artifacts": artifacts}
 
 

@@ -67,8 +67,10 @@ __all__ = [
 
 #: Bumped when a change here changes cached results (2: one cache entry per run; 3: entries
 #: carry a checksum, so entries of 2 are left to eviction and ``sal cache clear``; 4: records
-#: carry t_rel / r_rel and keys the KITTI segment lengths they were scored with).
-RUNNER_VERSION = 4
+#: carry t_rel / r_rel and keys the KITTI segment lengths they were scored with; 5: entries name
+#: their key (issue 23), so entries of 4, which would each be refused with a warning, are left
+#: to eviction and ``sal cache clear``).
+RUNNER_VERSION = 5
 
 
 def aggregate_metrics(runs: list[dict[str, Any]]) -> dict[str, Any]:
@@ -347,8 +349,7 @@ class TrialRunner:
             frames_cache=self.cache.root if self.cache_frames and self.cache is not None else None,
             stop=stop,
         )
-        folder = self.cache.root / "artifacts" if job.artifacts and self.cache is not None else None
-        return store_artifacts(self.executor.run(job), folder, key)
+        return store_artifacts(self.executor.run(job), self.cache if job.artifacts else None, key)
 
 
 def _not_cached(record: dict[str, Any]) -> str | None:

@@ -27,15 +27,25 @@ from typing import NamedTuple
 from pytest_sal.store.cache_keys import CacheError
 from pytest_sal.store.entry_format import FILES, MANIFEST, file_listing, pack_entry
 from sal_adapters.file_lock import FileLock
+from sal_adapters.textfiles import atomic_write_text
 
-__all__ = ["CacheFolder", "StoredEntry", "check_key"]
+__all__ = ["CacheFolder", "StoredEntry", "check_key", "write_refused"]
 
 _KEY = re.compile(r"[0-9a-f]{16,128}")
 _TEMP = re.compile(r"\.tmp-(?P<key>[0-9a-f]{16,128})-")
 _SHARD = re.compile(r"[0-9a-f]{2}")
 _GITIGNORE = "# Created by pytest-sal: the trial cache; safe to delete (sal cache clear).\n*\n"
-#: errno values of a write refused because the cache is read-only (mount or permissions).
-_READ_ONLY = frozenset({errno.EACCES, errno.EPERM, errno.EROFS})
+#: errno values of a write the file system refuses: read-only (mount or permissions) or full
+#: (disk, quota, file size limit).
+_REFUSED = frozenset({errno.EACCES, errno.EPERM, errno.EROFS, errno.ENOSPC, errno.EDQUOT, errno.EFBIG})
+
+
+def write_refused(exc: BaseException) -> str | None:
+    """Why the file system refused a write (``"No space left on device"``) when ``exc`` is such
+    an ``OSError`` (read-only or full, see ``_REFUSED``), else ``None``."""
+    if isinstance(exc, OSError) and exc.errno in _REFUSED:
+        return exc.strerror or os.strerror(exc.errno)
+    return None
 
 
 def check_key(key: str) -> str:
@@ -67,31 +77,31 @@ class CacheFolder:
         self._last_ns = 0
 
     def create(self) -> str | None:
-        """Create the folder (and ``locks/``; a ``.gitignore`` of ``*`` in a new or empty one)
-        and try a write in it: ``None`` when writable, else why not (``"Read-only file system"``).
+        """Create the folder and ``locks/``, write a ``.gitignore`` of ``*`` in a new folder (or one
+        holding only ``locks/``: its first ``.gitignore`` was refused), and try a write in it:
+        ``None`` when writable, else why not (``write_refused``: ``"Read-only file system"``,
+        ``"No space left on device"``). A refused ``.gitignore`` leaves no temporary file.
 
         Raises:
             CacheError: the root is not a folder, or cannot be created for another reason.
         """
         root = self.root
         try:
-            fresh = not root.exists() or (root.is_dir() and not any(root.iterdir()))
+            fresh = not root.exists() or (root.is_dir() and {child.name for child in root.iterdir()} <= {"locks"})
             root.mkdir(parents=True, exist_ok=True)
             (root / "locks").mkdir(exist_ok=True)
             probe = root / "locks" / f".probe-{os.getpid()}-{secrets.token_hex(4)}"
             os.close(os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644))
             os.unlink(probe)
+            gitignore = root / ".gitignore"
+            if fresh and not gitignore.exists():
+                atomic_write_text(gitignore, _GITIGNORE)
         except (FileExistsError, NotADirectoryError):
             raise CacheError("not a folder; choose another cache folder", root) from None
         except OSError as exc:
-            if exc.errno not in _READ_ONLY:
+            if (refused := write_refused(exc)) is None:
                 raise CacheError(f"cannot create the cache folder: {exc.strerror}", root) from None
-            return exc.strerror or str(exc)
-        gitignore = root / ".gitignore"
-        if fresh and not gitignore.exists():
-            temp = root / f".gitignore.{secrets.token_hex(4)}.tmp"
-            temp.write_text(_GITIGNORE, encoding="utf-8")
-            os.replace(temp, gitignore)
+            return refused
         return None
 
     # ---- paths and locks
@@ -113,7 +123,9 @@ class CacheFolder:
     # ---- writing entries (the caller holds the key's lock)
 
     def write_entry(self, key: str, raw: bytes) -> None:
-        """Write a result entry's bytes through a temporary sibling and ``os.replace``."""
+        """Write a result entry's bytes through a temporary sibling and ``os.replace``; the
+        temporary file is removed when that fails. A write the file system refuses
+        (``write_refused``) raises its ``OSError``, any other ``CacheError``."""
         path = self.entry_path(key)
         temp = self.temp_path(key, ".json")
         try:
@@ -126,6 +138,8 @@ class CacheFolder:
             self.stamp(temp)
             os.replace(temp, path)
         except OSError as exc:
+            if write_refused(exc) is not None:
+                raise
             raise CacheError(f"cannot write cache entry: {exc.strerror or exc}", path) from None
         finally:
             if temp.exists():
@@ -143,7 +157,7 @@ class CacheFolder:
             fill(work / FILES)
             if not (work / FILES).is_dir():
                 raise CacheError(f"compute_dir: the function removed its output folder {work / FILES}", files)
-            (work / MANIFEST).write_bytes(pack_entry({"files": file_listing(work / FILES, hashes=True)}))  # last
+            (work / MANIFEST).write_bytes(pack_entry(key, {"files": file_listing(work / FILES, hashes=True)}))  # last
             os.rename(work, files.parent)
             self.touch(files.parent)
         finally:

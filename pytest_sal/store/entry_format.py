@@ -1,12 +1,15 @@
 """The bytes of a cache entry and how they check themselves.
 
-A result entry is ``{"sha256": ..., "data": {...}}``, the checksum being that of the canonical
-JSON of ``data`` (keys sorted, compact, UTF-8 kept). A folder entry holds its files in
-``data/`` and, written last, ``manifest.json``: such an entry whose data lists each file's size
-and SHA-256 (``{"files": {relative path: [bytes, sha256]}}``).
+A result entry is ``{"sha256": ..., "key": ..., "data": {...}}``: the key it was stored under,
+and the checksum of the canonical JSON (keys sorted, compact, UTF-8 kept) of ``{"data": ...,
+"key": ...}``. The checksum covers the key, so an entry proves which key it belongs to: a valid
+entry of another trial copied under this key is refused like a damaged one. A folder entry holds
+its files in ``data/`` and, written last, ``manifest.json``: such an entry whose data lists each
+file's size and SHA-256 (``{"files": {relative path: [bytes, sha256]}}``).
 
 These encodings are the stored format: changing them turns every stored entry into a bad one
-(removed and computed again), so they stay as they are.
+(removed and computed again). Entries of the format before keys (``{"sha256", "data"}``, until
+issue 23) are such entries: they name no key, so nothing shows that they belong to theirs.
 """
 
 from __future__ import annotations
@@ -25,31 +28,36 @@ MANIFEST = "manifest.json"
 FILES = "data"
 
 
-def pack_entry(data: Mapping[str, Any]) -> bytes:
-    """The bytes of an entry holding ``data``: ``{"sha256": <of the canonical JSON>, "data": ...}``.
+def pack_entry(key: str, data: Mapping[str, Any]) -> bytes:
+    """The bytes of the entry of ``key`` holding ``data``: ``{"sha256": <of the canonical JSON of
+    key and data>, "key": key, "data": ...}``.
 
     Raises:
         TypeError, ValueError: ``data`` is not JSON-ready.
     """
     payload = _canonical(data)
-    return f'{{"sha256":"{_sha256(payload)}","data":{payload}}}\n'.encode()
+    return f'{{"sha256":"{_sha256(_signed(key, payload))}","key":{json.dumps(key, ensure_ascii=False)},"data":{payload}}}\n'.encode()
 
 
-def unpack_entry(raw: bytes) -> tuple[dict[str, Any] | None, str | None]:
-    """``(data, None)`` of an entry's bytes, or ``(None, what is wrong)`` in a few words."""
+def unpack_entry(raw: bytes, key: str) -> tuple[dict[str, Any] | None, str | None]:
+    """``(data, None)`` of the bytes of ``key``'s entry, or ``(None, what is wrong)`` in a few words."""
     try:
         entry = json.loads(raw.decode("utf-8"))
     except UnicodeDecodeError as exc:
         return None, f"not UTF-8 (byte 0x{raw[exc.start]:02x} at offset {exc.start})"
     except ValueError as exc:
         return None, f"not JSON ({exc})" if raw.strip() else "empty"
-    if not isinstance(entry, dict) or set(entry) != {"sha256", "data"}:
+    if isinstance(entry, dict) and set(entry) == {"sha256", "data"}:
+        return None, "names no key (written before pytest-sal entries named their key, so nothing shows it belongs to this one)"
+    if not isinstance(entry, dict) or set(entry) != {"sha256", "key", "data"}:
         shape = f"keys {', '.join(sorted(entry)[:5]) or '(none)'}" if isinstance(entry, dict) else f"a JSON {type(entry).__name__}"
-        return None, f"no checksum: {shape}, not sha256 and data (written by hand, or before pytest-sal checked its entries)"
+        return None, f"no checksum: {shape}, not sha256, key and data (written by hand, or before pytest-sal checked its entries)"
     if not isinstance(entry["data"], dict):
         return None, f"its data is a JSON {type(entry['data']).__name__}, not an object"
-    if _sha256(_canonical(entry["data"])) != entry["sha256"]:
+    if not isinstance(entry["key"], str) or _sha256(_signed(entry["key"], _canonical(entry["data"]))) != entry["sha256"]:
         return None, "checksum mismatch: changed after it was written"
+    if entry["key"] != key:
+        return None, f"it is the entry of key {entry['key'][:12]}..., not of {key[:12]}... (copied from another entry)"
     return entry["data"], None
 
 
@@ -85,6 +93,12 @@ def listing_mismatch(listed: Any, found: dict[str, list[Any]]) -> str | None:
 def _canonical(data: Mapping[str, Any]) -> str:
     """The JSON text an entry's checksum covers: keys sorted, compact, UTF-8 kept."""
     return json.dumps(dict(data), sort_keys=True, separators=(",", ":"), ensure_ascii=False)
+
+
+def _signed(key: str, payload: str) -> str:
+    """What an entry's checksum covers: the canonical JSON of ``{"data": ..., "key": key}``,
+    ``payload`` being the canonical JSON of its data."""
+    return f'{{"data":{payload},"key":{json.dumps(key, ensure_ascii=False)}}}'
 
 
 def _sha256(text: str) -> str:

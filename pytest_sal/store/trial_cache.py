@@ -17,19 +17,22 @@ Every entry appears by one ``os.replace``/``rename`` of a finished temporary sib
 see a whole entry or none. Reads set the entry's modification time, and :meth:`ContentCache.evict`
 removes the least recently used entries first.
 
-Entries check themselves (checksums, a folder's manifest). Every read checks the checksum and the reader's own
+Entries check themselves (checksums, a folder's manifest) and name the key they were stored
+under, inside what the checksum covers. Every read checks the checksum, the key and the reader's own
 ``check`` of the data's shape; every use of a folder entry compares the files' names and sizes
 with the manifest, and its first use by a :class:`ContentCache` object (once a session) also
-their SHA-256. An entry that is not UTF-8, not JSON, has no checksum, does not match it, fails
-``check`` or has a damaged file is never served: it is removed under its key's lock and
-computed again, with one :class:`CacheWarning` naming it and what was wrong. Entries written
-before checksums existed are such entries (trial runs changed keys instead, see
-``pytest_sal.engine.trial_runner.RUNNER_VERSION``). A ``compute`` whose ``transient`` hook gives a reason is
+their SHA-256. An entry that is not UTF-8, not JSON, has no checksum, does not match it, is
+another key's (a valid entry copied), fails ``check`` or has a damaged file is never served: it
+is removed under its key's lock and computed again, with one :class:`CacheWarning` naming it and
+what was wrong. Entries written before checksums or keys existed are such entries (trial runs
+changed keys instead, see ``pytest_sal.engine.trial_runner.RUNNER_VERSION``). A ``compute`` whose ``transient`` hook gives a reason is
 returned and not stored (a run the machine decided).
 
-A read-only cache (a read-only mount, or a folder this user cannot write) is used as it is:
-its entries are served, and what it lacks is computed and not stored, with one
-:class:`CacheWarning` per :class:`ContentCache` object saying so.
+A cache that cannot be written (a read-only mount, a folder this user cannot write, a full disk
+or quota) is used as it is: its entries are served, and what it lacks is computed, returned and
+not stored, with one :class:`CacheWarning` per :class:`ContentCache` object naming the folder and
+why. This holds from the first write the file system refuses, the ``.gitignore`` included; a
+refused write leaves no temporary file.
 
 >>> from pytest_sal.store.cache_keys import cache_key
 >>> key = cache_key(dataset="3f2a...", module={"name": "fog", "version": 1, "params": {"visibility_m": 30.0}},
@@ -41,6 +44,7 @@ its entries are served, and what it lacks is computed and not stored, with one
 from __future__ import annotations
 
 import atexit
+import functools
 import json
 import os
 import shutil
@@ -50,11 +54,12 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
-from pytest_sal.store.cache_folder import CacheFolder, check_key
+from pytest_sal.store.cache_folder import CacheFolder, check_key, write_refused
 from pytest_sal.store.cache_keys import CacheError
 from pytest_sal.store.entry_format import MANIFEST, file_listing, listing_mismatch, pack_entry, unpack_entry
 from sal_adapters.errors import CacheWarning
 from sal_adapters.file_lock import FileLock
+from sal_adapters.textfiles import atomic_write
 
 __all__ = [
     "DEFAULT_CACHE_DIR",
@@ -99,8 +104,8 @@ class ContentCache:
             of the entries at or under it by removing the least recently used ones.
 
     Attributes:
-        read_only: why entries cannot be stored (``"Read-only file system"``), found at the
-            first store; ``None`` while the cache is writable.
+        unwritable: why entries cannot be stored (``"Read-only file system"``, ``"No space left
+            on device"``), from the first store the file system refused; ``None`` until then.
     """
 
     def __init__(self, root: str | os.PathLike[str], max_bytes: int | None = None):
@@ -108,7 +113,7 @@ class ContentCache:
             raise ValueError(f"max_bytes must be None or an int >= 0, got {max_bytes!r}")
         self.root = Path(os.path.abspath(Path(root).expanduser()))
         self.max_bytes = max_bytes
-        self.read_only: str | None = None
+        self.unwritable: str | None = None
         self._ready = False
         self._folder = CacheFolder(self.root)
         self._hashed: set[str] = set()  # folder entries whose file hashes this object checked
@@ -140,13 +145,13 @@ class ContentCache:
 
     def put(self, key: str, data: Mapping[str, Any]) -> None:
         """Store ``data`` (a JSON-ready dict; tuples come back as lists) under ``key``, atomically
-        (nothing happens in a read-only cache)."""
+        (nothing happens in a cache that cannot be written)."""
         raw, _ = self._encode(key, data)
         if not self._ensure_root():
             return
         with self.lock(key):
-            self._folder.write_entry(key, raw)
-            self._evict_if_bounded()
+            if self._store(functools.partial(self._folder.write_entry, key, raw)):
+                self._evict_if_bounded()
 
     def compute(
         self, key: str, fn: Callable[[], Mapping[str, Any]], *, check: EntryCheck | None = None, transient: EntryCheck | None = None
@@ -176,8 +181,7 @@ class ContentCache:
                 return data, True
             self._discard(key, self.path(key), problem)
             raw, data = self._encode(key, fn())
-            if transient is None or transient(data) is None:
-                self._folder.write_entry(key, raw)
+            if (transient is None or transient(data) is None) and self._store(functools.partial(self._folder.write_entry, key, raw)):
                 self._evict_if_bounded()
         return data, False
 
@@ -191,9 +195,9 @@ class ContentCache:
         written beside it and the entry is renamed into place in one step, so a process killed
         midway leaves no entry (its temporary folder is removed by a later ``compute_dir`` of
         the key, :meth:`evict` or :meth:`clear`). A stored folder whose files do not match
-        its manifest is discarded and filled again. In a read-only cache a missing folder is
-        filled in a temporary folder outside it, removed when the process exits. Locking and
-        exceptions are as in :meth:`compute`.
+        its manifest is discarded and filled again. In a cache that cannot be written a missing
+        folder is filled in a temporary folder outside it, removed when the process exits.
+        Locking and exceptions are as in :meth:`compute`.
         """
         files = self.path(key, folder=True)
         entry = files.parent
@@ -208,10 +212,22 @@ class ContentCache:
             if found:
                 return files, True
             self._discard(key, entry, problem)
-            self._folder.write_folder(key, fn)
-            self._hashed.add(key)
-            self._evict_if_bounded()
+            stored = self._store(functools.partial(self._folder.write_folder, key, fn))
+        if not stored:
+            return _fill_outside(fn), False
+        self._hashed.add(key)
+        self._evict_if_bounded()
         return files, False
+
+    # ---- report images
+
+    def put_artifact(self, name: str, data: bytes) -> Path | None:
+        """Write ``data`` (a report image) to ``artifacts/<name>`` atomically and return its path;
+        ``None`` in a cache that cannot be written (nothing of it is left)."""
+        path = self.root / "artifacts" / name
+        if self._ensure_root() and self._store(functools.partial(atomic_write, path, lambda handle: handle.write(data), binary=True)):
+            return path
+        return None
 
     # ---- locking
 
@@ -269,21 +285,41 @@ class ContentCache:
     # ---- internals
 
     def _ensure_root(self) -> bool:
-        """Create the cache folder once and try a write in it; False when it is read-only
+        """Create the cache folder once and try a write in it; False when it cannot be written
         (warned once)."""
-        if self._ready or self.read_only is not None:
+        if self._ready or self.unwritable is not None:
             return self._ready
-        self.read_only = self._folder.create()
-        if self.read_only is not None:
-            warnings.warn(
-                CacheWarning(
-                    f"the cache at {self.root} is read-only ({self.read_only}): the entries it holds are used, new results are computed and not stored"
-                ),
-                stacklevel=3,
-            )
+        refused = self._folder.create()
+        if refused is not None:
+            self._refuse(refused)
             return False
         self._ready = True
         return True
+
+    def _store(self, write: Callable[[], object]) -> bool:
+        """``write()`` into the cache (an entry under its key's lock, or a report image); False
+        when the cache cannot be written, or the file system refused this write (``write_refused``):
+        the writers leave nothing, and the cache stores nothing more (warned once)."""
+        if self.unwritable is not None:
+            return False
+        try:
+            write()
+        except OSError as exc:
+            if (refused := write_refused(exc)) is None:
+                raise
+            self._refuse(refused)
+            return False
+        return True
+
+    def _refuse(self, why: str) -> None:
+        """From now on store nothing: the file system refused a write, ``why`` (warned once)."""
+        if self.unwritable is not None:  # another thread's write was refused first
+            return
+        self._ready, self.unwritable = False, why
+        message = (
+            f"the cache at {self.root} cannot be written ({why}): the entries it holds are used, new results are computed and not stored"
+        )
+        warnings.warn(CacheWarning(message), stacklevel=4)
 
     def _encode(self, key: str, data: Any) -> tuple[bytes, dict[str, Any]]:
         """The entry's bytes for ``data`` and ``data`` as it reads back (tuples become lists)."""
@@ -291,7 +327,7 @@ class ContentCache:
         if not isinstance(data, Mapping):
             raise CacheError(f"cache entry {key[:12]}...: expected a dict, got a {type(data).__name__}", path)
         try:
-            raw = pack_entry(data)
+            raw = pack_entry(key, data)
         except (TypeError, ValueError) as exc:
             raise CacheError(f"cache entry {key[:12]}... is not JSON-ready: {exc}", path) from None
         return raw, json.loads(raw)["data"]
@@ -308,7 +344,7 @@ class ContentCache:
             raise CacheError("not a folder; choose another cache folder", self.root) from None
         except OSError as exc:
             return None, f"cannot read it ({exc.strerror})"
-        data, problem = unpack_entry(raw)
+        data, problem = unpack_entry(raw, key)
         if data is not None and check is not None:
             problem = check(data)
         if problem is not None:
@@ -318,13 +354,13 @@ class ContentCache:
 
     def _discard(self, key: str, path: Path, problem: str | None) -> None:
         """Warn that the entry of ``key`` at ``path`` is bad (when ``problem``) and remove it: the
-        caller holds the key's lock, or the cache is read-only and the entry stays."""
+        caller holds the key's lock, or the cache cannot be written and the entry stays."""
         if problem is None:
             return
-        done = "ignored (the cache is read-only)" if self.read_only else "removed"
+        done = "ignored (the cache cannot be written)" if self.unwritable else "removed"
         warnings.warn(CacheWarning(f"{path}: bad cache entry, {done} and computed again: {problem}"), stacklevel=3)
         self._hashed.discard(key)
-        if self.read_only is None:
+        if self.unwritable is None:
             self._folder.bury(key, path)
 
     def _verify_dir(self, key: str) -> tuple[bool, str | None]:
@@ -341,7 +377,7 @@ class ContentCache:
             return False, f"no {MANIFEST} (written before pytest-sal checked its entries, or a damaged entry)"
         except OSError as exc:
             return False, f"cannot read {MANIFEST} ({exc.strerror})"
-        manifest, problem = unpack_entry(raw)
+        manifest, problem = unpack_entry(raw, key)
         if manifest is None:
             return False, f"{MANIFEST}: {problem}"
         try:
@@ -360,7 +396,7 @@ class ContentCache:
 
 
 def _fill_outside(fn: Callable[[Path], None]) -> Path:
-    """A temporary folder outside the cache filled by ``fn`` (a read-only cache's miss),
+    """A temporary folder outside the cache filled by ``fn`` (the miss of a cache that cannot be written),
     removed when the process exits."""
     folder = Path(tempfile.mkdtemp(prefix="sal-uncached-"))
     atexit.register(shutil.rmtree, folder, ignore_errors=True)
