@@ -134,9 +134,12 @@ def is_grey(rgb: np.ndarray) -> bool:
 def _imread(path: Path, flags: int, size: Size | None = None) -> np.ndarray:
     """Decode ``path`` after checking the size its header states (``_check_size``)."""
     path = Path(path)
-    if not path.is_file():
-        raise DatasetError("image file not found", path)
-    data = np.fromfile(path, dtype=np.uint8)
+    try:
+        if not path.is_file():
+            raise DatasetError("image file not found", path)
+        data = np.fromfile(path, dtype=np.uint8)
+    except OSError as exc:  # a name too long for the file system, a file this user may not read
+        raise DatasetError(f"cannot read image ({exc.strerror or exc})", path) from None
     _check_size(header_size(data.data, path), size, path)
     image = cv2.imdecode(data, flags) if data.size else None
     if image is None:
