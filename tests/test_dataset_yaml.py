@@ -58,7 +58,9 @@ def test_an_alias_bomb_is_one_short_line(sensor_yaml: Path, camera_yaml: Path, k
     path = sensor_yaml if key == "intrinsics" else camera_yaml
     text = path.read_text().replace("%YAML:1.0\n", "")
     path.write_text(alias_bomb(6) + re.sub(rf"(?m)^{key}: .*$", f"{key}: *l5", text))
-    assert open_error(path).endswith("holds more than 10000 values once its YAML aliases are expanded; a dataset YAML file needs a few hundred")
+    assert open_error(path).endswith(
+        "holds more than 10000 values once its YAML aliases are expanded; a dataset YAML file needs a few hundred"
+    )
 
 
 @pytest.mark.parametrize("which", ["sensor.yaml", "camera.yaml"])
