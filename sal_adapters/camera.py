@@ -3,11 +3,30 @@
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field, replace
+from numbers import Real
 from typing import Any
 
 import numpy as np
 
-__all__ = ["Camera"]
+__all__ = ["MAX_FOCAL_PX", "MAX_FRAME_PIXELS", "MAX_FRAME_SIDE_PX", "Camera", "frame_size_problem"]
+
+#: The largest frame pytest-sal reads: each side at most ``MAX_FRAME_SIDE_PX`` and at most
+#: ``MAX_FRAME_PIXELS`` pixels in all (50 MP, 150 MB as RGB). A camera or an image file over it
+#: is refused before any pixel is allocated (an image from its header).
+MAX_FRAME_SIDE_PX = 32_768
+MAX_FRAME_PIXELS = 50_000_000
+#: The longest focal length a camera may have (px): a 10^6 px telescope.
+MAX_FOCAL_PX = 1e6
+
+
+def frame_size_problem(width: float, height: float) -> str | None:
+    """Why ``width`` x ``height`` (px) cannot be a frame's size (not whole, not positive, over
+    the limits above), or ``None`` when it can."""
+    if not all(isinstance(v, Real) and 1 <= v <= MAX_FRAME_SIDE_PX and v == int(v) for v in (width, height)):
+        return f"each side must be a whole number of pixels from 1 to {MAX_FRAME_SIDE_PX}, got {width!s:.20}x{height!s:.20} px"
+    if width * height > MAX_FRAME_PIXELS:
+        return f"{int(width)}x{int(height)} px is over the limit of {MAX_FRAME_PIXELS} pixels a frame"
+    return None
 
 
 @dataclass(frozen=True)
@@ -41,10 +60,13 @@ class Camera:
 
     def __post_init__(self) -> None:
         for name in ("fx", "fy"):
-            if not float(getattr(self, name)) > 0:
-                raise ValueError(f"camera {name} must be > 0 px, got {getattr(self, name)!r}")
-        if int(self.width) <= 0 or int(self.height) <= 0:
-            raise ValueError(f"camera size must be positive, got {self.width}x{self.height} px")
+            if not 0 < float(getattr(self, name)) <= MAX_FOCAL_PX:
+                raise ValueError(f"camera {name} must be > 0 px and at most {MAX_FOCAL_PX:g} px, got {getattr(self, name)!r}")
+        if not (np.isfinite(float(self.cx)) and np.isfinite(float(self.cy))):
+            raise ValueError(f"camera principal point must be finite, got cx={self.cx!r} cy={self.cy!r} px")
+        problem = frame_size_problem(self.width, self.height)
+        if problem:
+            raise ValueError(f"camera size: {problem}")
         if self.T_left_right is not None and len(self.T_left_right) != 16:
             raise ValueError("camera T_left_right must hold 16 floats (row-major 4x4)")
 

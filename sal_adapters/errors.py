@@ -11,7 +11,11 @@ from __future__ import annotations
 
 from os import PathLike
 
-__all__ = ["CacheWarning", "DatasetError", "DatasetWarning", "SalError", "WriteError"]
+__all__ = ["MAX_PROBLEM_CHARS", "CacheWarning", "DatasetError", "DatasetWarning", "SalError", "WriteError"]
+
+
+#: Characters of a ``DatasetError``'s problem (past the file and line): one line, never a dump.
+MAX_PROBLEM_CHARS = 300
 
 
 class SalError(Exception):
@@ -32,7 +36,12 @@ class DatasetError(SalError, ValueError):
         where = ""
         if self.path is not None:
             where = f"{self.path}:{line}: " if line is not None else f"{self.path}: "
-        super().__init__(where + message)
+        if len(message) > MAX_PROBLEM_CHARS:  # a reader quoted a whole hostile line or value
+            message = message[: MAX_PROBLEM_CHARS - 3] + "..."
+        text = where + message
+        if not text.isprintable():  # a path or a value read from a hostile file: one line, escaped
+            text = "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+        super().__init__(text)
 
 
 class WriteError(SalError, OSError):

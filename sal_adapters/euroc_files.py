@@ -14,11 +14,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
-from sal_adapters.camera import Camera
+from sal_adapters.bounded_yaml import quote, read_dataset_yaml
+from sal_adapters.camera import Camera, frame_size_problem
 from sal_adapters.errors import DatasetError
-from sal_adapters.textfiles import check_times, read_rows, read_text
+from sal_adapters.textfiles import check_times, read_rows
 
 __all__ = [
     "CAMERA_KEYS",
@@ -36,6 +36,8 @@ __all__ = [
 #: Keys every camera ``sensor.yaml`` must hold.
 CAMERA_KEYS = ("T_BS", "rate_hz", "resolution", "intrinsics", "distortion_coefficients")
 FRAME_CSV_HEADER = "#timestamp [ns],filename"
+#: The fastest camera rate a sensor.yaml may state (Hz).
+_MAX_RATE_HZ = 1e6
 _RADTAN_NAMES = ("radial-tangential", "radtan", "plumb_bob", "none")
 
 
@@ -59,49 +61,44 @@ class FrameRow:
 
 
 def read_sensor_yaml(path: Path) -> dict[str, Any]:
-    """Parse a EuRoC ``sensor.yaml`` (the OpenCV ``%YAML:1.0`` directive is dropped)."""
-    path = Path(path)
-    text = read_text(path, what="sensor file")
-    text = re.sub(r"\A%YAML[: ]\s*1\.\d+[^\n]*", "", text)  # keeps the line numbers
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        line = None if mark is None else mark.line + 1
-        raise DatasetError(f"cannot parse YAML ({getattr(exc, 'problem', None) or exc})", path, line) from None
-    if not isinstance(data, dict):
-        raise DatasetError("expected a YAML mapping of sensor keys", path)
-    return data
+    """Parse a EuRoC ``sensor.yaml`` within the bounded loader's limits (the OpenCV
+    ``%YAML:1.0`` directive is dropped)."""
+    return read_dataset_yaml(Path(path), "sensor keys", _drop_directive).data
+
+
+def _drop_directive(text: str) -> str:
+    return re.sub(r"\A%YAML[: ]\s*1\.\d+[^\n]*", "", text)  # keeps the line numbers
 
 
 def read_camera_sensor(path: Path) -> CameraSensor:
     """Camera, rate (Hz) and ``T_BS`` from a camera ``sensor.yaml``; every key of ``CAMERA_KEYS``
-    must be present."""
+    must be present, the resolution within ``MAX_FRAME_SIDE_PX`` and ``MAX_FRAME_PIXELS``."""
     path = Path(path)
     data = read_sensor_yaml(path)
     missing = [key for key in CAMERA_KEYS if key not in data]
     if missing:
         raise DatasetError(f"missing key {', '.join(map(repr, missing))} (a camera sensor.yaml needs {', '.join(CAMERA_KEYS)})", path)
-    model = str(data.get("camera_model", "pinhole"))
+    model = data.get("camera_model", "pinhole")
     if model != "pinhole":
-        raise DatasetError(f"camera_model {model!r} is not supported (pinhole only)", path)
-    dist_model = str(data.get("distortion_model", "radial-tangential"))
+        raise DatasetError(f"camera_model {quote(model)} is not supported (pinhole only)", path)
+    dist_model = data.get("distortion_model", "radial-tangential")
     if dist_model not in _RADTAN_NAMES:
-        raise DatasetError(f"distortion_model {dist_model!r} is not supported (radial-tangential only)", path)
+        raise DatasetError(f"distortion_model {quote(dist_model)} is not supported (radial-tangential only)", path)
     intrinsics = _numbers(data, "intrinsics", path, (4,))
     resolution = _numbers(data, "resolution", path, (2,))
     distortion = _numbers(data, "distortion_coefficients", path, (0, 4, 5))
     T_BS = read_transform(data["T_BS"], path)
     rate = data["rate_hz"]
-    if isinstance(rate, bool) or not isinstance(rate, (int, float)) or not 0 < rate < float("inf"):
-        raise DatasetError(f"key 'rate_hz' must be a positive number (Hz), got {rate!r}", path)
-    if any(v != int(v) for v in resolution):
-        raise DatasetError(f"key 'resolution' must be two integers [width, height] (px), got {data['resolution']!r}", path)
+    if isinstance(rate, bool) or not isinstance(rate, (int, float)) or not 0 < rate <= _MAX_RATE_HZ:
+        raise DatasetError(f"key 'rate_hz' must be a positive number of Hz up to {_MAX_RATE_HZ:g}, got {quote(rate)}", path)
+    problem = frame_size_problem(*resolution)
+    if problem:
+        raise DatasetError(f"key 'resolution' must be [width, height] (px): {problem}", path)
     try:
         fx, fy, cx, cy = intrinsics
         camera = Camera(fx, fy, cx, cy, width=int(resolution[0]), height=int(resolution[1]), distortion=tuple(distortion))
-    except ValueError as exc:
-        raise DatasetError(str(exc), path) from None
+    except ValueError as exc:  # only the intrinsics are left to check
+        raise DatasetError(f"key 'intrinsics': {exc}", path) from None
     return CameraSensor(camera=camera, rate_hz=float(rate), T_BS=T_BS)
 
 
@@ -132,11 +129,11 @@ def _numbers(data: dict[str, Any], key: str, path: Path, counts: tuple[int, ...]
     if isinstance(value, (list, tuple)):
         try:
             numbers = [float(v) for v in value]
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             numbers = None
     if numbers is None or len(numbers) not in counts or not np.all(np.isfinite(numbers)):
         expected = " or ".join(map(str, counts))
-        raise DatasetError(f"key {key!r} must be a list of {expected} numbers, got {value!r}", path)
+        raise DatasetError(f"key {key!r} must be a list of {expected} numbers, got {quote(value)}", path)
     return numbers
 
 
@@ -145,8 +142,8 @@ def read_transform(value: Any, path: Path) -> np.ndarray:
     data = value.get("data") if isinstance(value, dict) else value
     try:
         T = np.array(data, dtype=np.float64).reshape(4, 4)
-    except (TypeError, ValueError):
-        raise DatasetError(f"key 'T_BS' must hold 16 numbers (4x4 row-major), got {value!r}", path) from None
+    except (TypeError, ValueError, OverflowError):
+        raise DatasetError(f"key 'T_BS' must hold 16 numbers (4x4 row-major), got {quote(value)}", path) from None
     if isinstance(value, dict) and (value.get("rows", 4) != 4 or value.get("cols", 4) != 4):
         raise DatasetError("key 'T_BS' must be 4 rows x 4 cols", path)
     if not np.all(np.isfinite(T)) or abs(np.linalg.det(T[:3, :3]) - 1.0) > 1e-3:

@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from sal_adapters.bounded_yaml import one_line
 from sal_adapters.camera import Camera
 from sal_adapters.datasets import DatasetKind
 from sal_adapters.errors import DatasetError, DatasetWarning
@@ -188,8 +189,8 @@ def _read_timestamp_file(folder: Path, path: Path) -> tuple[list[Path], np.ndarr
         files = []
         for number, (_, name) in listed:
             file = folder / str(name)
-            if not file.is_file():
-                raise DatasetError(f"listed image {name} not found in {folder}", path, number)
+            if not _exists(file):
+                raise DatasetError(f"listed image {one_line(str(name), 80)} not found in {folder}", path, number)
             files.append(file)
         return files, np.array([row[1][0] for row in listed], dtype=np.float64)
     if columns != 1:
@@ -199,6 +200,14 @@ def _read_timestamp_file(folder: Path, path: Path) -> tuple[list[Path], np.ndarr
     if len(times) != len(files):
         raise DatasetError(f"{len(times)} timestamps for {len(files)} images in {folder} (one time per image, in name order)", path)
     return files, times
+
+
+def _exists(file: Path) -> bool:
+    """``file.is_file()``, false for a name the file system refuses (too long)."""
+    try:
+        return file.is_file()
+    except OSError:
+        return False
 
 
 def _image_files(folder: Path) -> list[Path]:

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import io
+import struct
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 
@@ -10,10 +12,13 @@ import cv2
 import numpy as np
 
 from sal_adapters.atomic import staged_file
+from sal_adapters.camera import MAX_FRAME_PIXELS, frame_size_problem
 from sal_adapters.errors import DatasetError
 
 __all__ = [
     "IMAGE_SUFFIXES",
+    "Size",
+    "header_size",
     "is_grey",
     "probe_image",
     "read_depth",
@@ -27,9 +32,17 @@ __all__ = [
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".pgm")
 
 
-def read_image(path: Path) -> np.ndarray:
-    """Decode an image file to HxWx3 uint8 RGB (grey images are expanded to three channels)."""
-    raw = _imread(path, cv2.IMREAD_UNCHANGED)
+#: An image's ``(width, height)`` in px.
+Size = tuple[int, int]
+
+
+def read_image(path: Path, size: Size | None = None) -> np.ndarray:
+    """Decode an image file to HxWx3 uint8 RGB (grey images are expanded to three channels).
+
+    Its header is read first: an image over ``MAX_FRAME_PIXELS`` or, when ``size`` (px) is
+    given, of another size is refused without being decoded (``DatasetError`` naming the file).
+    """
+    raw = _imread(path, cv2.IMREAD_UNCHANGED, size)
     if raw.dtype == np.uint16:
         raw = (raw >> 8).astype(np.uint8)
     elif raw.dtype != np.uint8:
@@ -42,16 +55,17 @@ def read_image(path: Path) -> np.ndarray:
 
 
 def probe_image(path: Path) -> tuple[int, int, bool]:
-    """``(width, height, single_channel)`` of an image file (decodes it once)."""
+    """``(width, height, single_channel)`` of an image file (decodes it once, within
+    ``MAX_FRAME_PIXELS``)."""
     raw = _imread(path, cv2.IMREAD_UNCHANGED)
     return int(raw.shape[1]), int(raw.shape[0]), raw.ndim == 2 or raw.shape[2] == 1
 
 
-def read_depth(path: Path, depth_scale: float | None) -> np.ndarray:
+def read_depth(path: Path, depth_scale: float | None, size: Size | None = None) -> np.ndarray:
     """Decode a depth map to float32 metres (0 = invalid).
 
     ``.npy`` files hold metres already (floats, 2-D); 16-bit images hold ``metres * depth_scale``
-    (TUM: 5000).
+    (TUM: 5000). With ``size`` (px), a map of another size is refused (an image before decoding).
     """
     path = Path(path)
     if path.suffix == ".npy":
@@ -61,10 +75,11 @@ def read_depth(path: Path, depth_scale: float | None) -> np.ndarray:
             raise DatasetError(f"cannot read depth array ({exc})", path) from None
         if depth.ndim != 2:
             raise DatasetError(f"depth array must be 2-D, got shape {depth.shape}", path)
+        _check_size((depth.shape[1], depth.shape[0]), size, path)
         if not np.issubdtype(depth.dtype, np.floating):
             raise DatasetError(f"depth array must hold floats (m), got {depth.dtype}", path)
         return depth.astype(np.float32, copy=False)
-    raw = _imread(path, cv2.IMREAD_UNCHANGED)
+    raw = _imread(path, cv2.IMREAD_UNCHANGED, size)
     if raw.ndim != 2:
         raise DatasetError(f"depth image must have one channel, got {raw.shape[2]}", path)
     if depth_scale is None or depth_scale <= 0:
@@ -116,15 +131,70 @@ def is_grey(rgb: np.ndarray) -> bool:
     return rgb.ndim == 2 or (np.array_equal(rgb[..., 0], rgb[..., 1]) and np.array_equal(rgb[..., 1], rgb[..., 2]))
 
 
-def _imread(path: Path, flags: int) -> np.ndarray:
+def _imread(path: Path, flags: int, size: Size | None = None) -> np.ndarray:
+    """Decode ``path`` after checking the size its header states (``_check_size``)."""
     path = Path(path)
-    if not path.is_file():
-        raise DatasetError("image file not found", path)
-    data = np.fromfile(path, dtype=np.uint8)
+    try:
+        if not path.is_file():
+            raise DatasetError("image file not found", path)
+        data = np.fromfile(path, dtype=np.uint8)
+    except OSError as exc:  # a name too long for the file system, a file this user may not read
+        raise DatasetError(f"cannot read image ({exc.strerror or exc})", path) from None
+    _check_size(header_size(data.data, path), size, path)
     image = cv2.imdecode(data, flags) if data.size else None
     if image is None:
         raise DatasetError("cannot decode image (corrupt or not an image)", path)
     return image
+
+
+def _check_size(found: Size, expected: Size | None, path: Path) -> None:
+    """``DatasetError`` naming ``path`` unless ``found`` (px) is a frame's size
+    (``frame_size_problem``) and, when given, the ``expected`` one."""
+    problem = frame_size_problem(*found)
+    if problem:
+        raise DatasetError(f"image refused: {problem}", path)
+    if expected is not None and tuple(found) != tuple(expected):
+        raise DatasetError(
+            f"image is {found[0]}x{found[1]} px but the sequence's camera is {expected[0]}x{expected[1]} px "
+            "(every frame of a camera must have its size)",
+            path,
+        )
+
+
+#: JPEG start-of-frame markers, whose segment holds the image size.
+_JPEG_SOF = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
+
+
+def header_size(data: bytes | memoryview, path: Path) -> Size:
+    """``(width, height)`` (px) an image file's header states, read without decoding: PNG's
+    ``IHDR`` and JPEG's start-of-frame here, other formats by PIL (which reads only the
+    header). ``DatasetError`` naming ``path`` when no header is found."""
+    if data[:8] == b"\x89PNG\r\n\x1a\n" and data[12:16] == b"IHDR" and len(data) >= 24:
+        width, height = struct.unpack(">II", data[16:24])
+        return int(width), int(height)
+    if data[:2] == b"\xff\xd8":
+        position = 2
+        while position + 9 <= len(data) and data[position] == 0xFF:
+            if data[position + 1] == 0xFF:  # a fill byte
+                position += 1
+                continue
+            marker, length = data[position + 1], int.from_bytes(data[position + 2 : position + 4], "big")
+            if marker in _JPEG_SOF:
+                height, width = struct.unpack(">HH", data[position + 5 : position + 9])
+                return int(width), int(height)
+            position += 2 + length
+        raise DatasetError("cannot decode image (a JPEG without a readable frame header)", path)
+    from PIL import Image  # only here: BMP, TIFF, PNM are rare in datasets
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            with Image.open(io.BytesIO(data)) as image:
+                return image.size
+    except Image.DecompressionBombError:
+        raise DatasetError(f"image refused: its header states more than {MAX_FRAME_PIXELS} pixels", path) from None
+    except (OSError, ValueError, SyntaxError, struct.error):  # what PIL raises for a file it cannot read
+        raise DatasetError("cannot decode image (corrupt or not an image)", path) from None
 
 
 def _imwrite(path: Path, data: np.ndarray) -> None:

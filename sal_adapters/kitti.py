@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from sal_adapters.camera import Camera
+from sal_adapters.camera import MAX_FOCAL_PX, Camera
 from sal_adapters.datasets import DatasetKind
 from sal_adapters.errors import DatasetError, DatasetWarning
 from sal_adapters.images import IMAGE_SUFFIXES, read_image, write_image
@@ -149,7 +149,7 @@ def read_calib(path: Path, required: list[str]) -> dict[str, np.ndarray]:
 
 
 #: focal lengths (px) a camera can have: a 1 px lens to a 10^6 px telescope
-_FOCAL_RANGE_PX = (1.0, 1e6)
+_FOCAL_RANGE_PX = (1.0, MAX_FOCAL_PX)
 
 
 def _check_projection(P: np.ndarray, key: str, path: Path, line: int) -> None:

@@ -26,8 +26,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
+from sal_adapters.bounded_yaml import quote, read_dataset_yaml
 from sal_adapters.camera import Camera
 from sal_adapters.errors import DatasetError
 from sal_adapters.sequence import Frame
@@ -65,22 +65,8 @@ def read_camera_yaml(path: Path, width: int, height: int) -> Camera:
             invalid value or a size that differs from the images.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-        loader = yaml.SafeLoader(text)
-        try:
-            node = loader.get_single_node()
-            data = loader.construct_document(node) if node is not None else None
-        finally:
-            loader.dispose()
-    except yaml.MarkedYAMLError as exc:
-        mark = exc.problem_mark or exc.context_mark
-        raise DatasetError(f"invalid YAML: {exc.problem or exc}", path, None if mark is None else mark.line + 1) from None
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-        raise DatasetError(f"cannot read camera file ({exc})", path) from None
-    if not isinstance(data, dict):
-        raise DatasetError("expected a mapping of fx, fy, cx, cy[, width, height, distortion, depth_scale]", path)
-    lines = {str(k.value): k.start_mark.line + 1 for k, _ in node.value}
+    document = read_dataset_yaml(path, "fx, fy, cx, cy[, width, height, distortion, depth_scale]")
+    data, lines = document.data, document.key_lines
 
     def fail(message: str, key: str | None = None) -> DatasetError:
         return DatasetError(message, path, lines.get(key) if key else None)
@@ -91,7 +77,7 @@ def read_camera_yaml(path: Path, width: int, height: int) -> Camera:
 
     unknown = [str(k) for k in data if k not in _CAMERA_KEYS]
     if unknown:
-        raise fail(f"unknown key {unknown[0]!r} (allowed: {', '.join(_CAMERA_KEYS)})", unknown[0])
+        raise fail(f"unknown key {quote(unknown[0], 40)} (allowed: {', '.join(_CAMERA_KEYS)})", unknown[0])
     values: dict[str, Any] = {}
     for key in ("fx", "fy", "cx", "cy"):
         if key not in data:
@@ -136,13 +122,13 @@ def write_camera_yaml(path: Path, camera: Camera, depth_scale: float | None = No
 def _number(value: Any, fail: Callable[[str], DatasetError]) -> float:
     """A finite float from a YAML scalar (``1e-05`` loads as text in YAML 1.1, so text is parsed)."""
     if isinstance(value, bool):
-        raise fail(f"expected a number, got {value!r}")
+        raise fail(f"expected a number, got {quote(value)}")
     try:
         number = float(value)
-    except (TypeError, ValueError):
-        raise fail(f"expected a number, got {value!r}") from None
+    except (TypeError, ValueError, OverflowError):
+        raise fail(f"expected a number, got {quote(value)}") from None
     if not np.isfinite(number):
-        raise fail(f"expected a finite number, got {value!r}")
+        raise fail(f"expected a finite number, got {quote(value)}")
     return number
 
 

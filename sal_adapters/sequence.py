@@ -14,7 +14,7 @@ import numpy as np
 
 from sal_adapters.camera import Camera
 from sal_adapters.errors import DatasetError
-from sal_adapters.images import read_depth, read_image
+from sal_adapters.images import Size, read_depth, read_image
 from sal_adapters.trajectory import Trajectory
 
 __all__ = ["SENSORS", "Frame", "FrameRecord", "Sensor", "Sequence", "Source", "as_sensor"]
@@ -79,17 +79,22 @@ class Frame:
 
     @cached_property
     def image(self) -> np.ndarray:
-        return _decode(self.record.image, read_image)
+        """The left image; a file of another size than the camera's is refused undecoded."""
+        return _decode(self.record.image, lambda p: read_image(p, _size(self._camera)))
 
     @cached_property
     def right(self) -> np.ndarray | None:
-        return None if self.record.right is None else _decode(self.record.right, read_image)
+        """The right image (the size of ``camera.right`` when the pair is not rectified)."""
+        if self.record.right is None:
+            return None
+        return _decode(self.record.right, lambda p: read_image(p, _size(self._camera.right or self._camera)))
 
     @cached_property
     def depth(self) -> np.ndarray | None:
+        """The depth map (m), of the camera's size."""
         if self.record.depth is None:
             return None
-        return _decode(self.record.depth, lambda p: read_depth(p, self._camera.depth_scale))
+        return _decode(self.record.depth, lambda p: read_depth(p, self._camera.depth_scale, _size(self._camera)))
 
     def require(self, what: Literal["right", "depth"]) -> np.ndarray:
         """The right image or the depth map of a frame that must have it (a stereo or an RGB-D
@@ -101,6 +106,11 @@ class Frame:
 
     def __repr__(self) -> str:
         return f"Frame(index={self.index}, timestamp={self.timestamp:.6f})"
+
+
+def _size(camera: Camera) -> Size:
+    """``(width, height)`` (px) of the images of ``camera``."""
+    return int(camera.width), int(camera.height)
 
 
 def _decode(source: Source, reader: Callable[[Path], np.ndarray]) -> np.ndarray:

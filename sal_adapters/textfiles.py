@@ -14,18 +14,46 @@ from sal_adapters.errors import DatasetError
 if TYPE_CHECKING:  # numpy loads with read_numeric_table: writers such as the sal commands stay light
     import numpy as np
 
-__all__ = ["atomic_write", "atomic_write_text", "check_times", "format_float", "read_numeric_table", "read_rows", "read_text"]
+__all__ = [
+    "MAX_TEXT_BYTES",
+    "atomic_write",
+    "atomic_write_text",
+    "check_times",
+    "format_float",
+    "read_numeric_table",
+    "read_rows",
+    "read_text",
+]
 
 
-def read_text(path: Path, what: str = "file") -> str:
-    """UTF-8 content of a text file; ``DatasetError`` naming it when missing or unreadable."""
+#: Largest text file a dataset reader reads (bytes): the longest real list or trajectory
+#: (EuRoC ground truth, 36 000 rows) is a few MB.
+MAX_TEXT_BYTES = 64 * 2**20
+
+
+def read_text(path: Path, what: str = "file", max_bytes: int = MAX_TEXT_BYTES) -> str:
+    """UTF-8 content of a text file of at most ``max_bytes``, its size checked before it is
+    read; ``DatasetError`` naming it when missing, unreadable or too large (``what`` names it
+    in messages)."""
     path = Path(path)
     if not path.is_file():
         raise DatasetError(f"{what} not found", path)
     try:
-        return path.read_text(encoding="utf-8")
+        with path.open("rb") as handle:
+            size = os.fstat(handle.fileno()).st_size
+            data = handle.read(max_bytes + 1) if size <= max_bytes else b""
+        if size > max_bytes or len(data) > max_bytes:  # a file that grows while read
+            raise DatasetError(f"the file is {max(size, len(data))} bytes; the limit is {max_bytes} bytes", path)
+        return data.decode("utf-8")
     except (OSError, UnicodeDecodeError) as exc:
-        raise DatasetError(f"cannot read text file ({exc})", path) from None
+        raise DatasetError(f"cannot read text file ({_reason(exc)})", path) from None
+
+
+def _reason(exc: OSError | UnicodeDecodeError) -> str:
+    """Why a file could not be read, in one short line (a decode error quotes no bytes)."""
+    if isinstance(exc, UnicodeDecodeError):
+        return f"not UTF-8 text: byte {exc.start} is not valid"
+    return exc.strerror or str(exc)
 
 
 def read_rows(path: Path, delimiter: str | None = None) -> list[tuple[int, list[str]]]:

@@ -46,8 +46,9 @@ class Trajectory:
         q = np.array(self.quaternions, dtype=np.float64).reshape(-1, 4)
         if not len(t) == len(p) == len(q):
             raise ValueError(f"trajectory arrays differ in length: {len(t)} timestamps, {len(p)} positions, {len(q)} quaternions")
-        norms = np.linalg.norm(q, axis=1, keepdims=True)
-        if np.any(norms < 1e-9) or not np.all(np.isfinite(q)) or not np.all(np.isfinite(p)):
+        with np.errstate(over="ignore"):  # a norm too large for a float is refused below
+            norms = np.linalg.norm(q, axis=1, keepdims=True)
+        if np.any(norms < 1e-9) or not np.all(np.isfinite(norms)) or not np.all(np.isfinite(q)) or not np.all(np.isfinite(p)):
             raise ValueError("trajectory holds a zero-length or non-finite quaternion or position")
         q = q / norms
         for name, arr in (("timestamps", t), ("positions", p), ("quaternions", q)):

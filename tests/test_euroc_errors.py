@@ -124,7 +124,7 @@ def test_sensor_yaml_syntax_error(tiny: Path) -> None:
     assert lines[0] == "%YAML:1.0" and lines[16].startswith("resolution:")
     lines[16] = "resolution: [752, 480"
     path.write_text("\n".join(lines) + "\n")
-    with pytest.raises(DatasetError, match=rf"^{re.escape(str(path))}:18: cannot parse YAML"):
+    with pytest.raises(DatasetError, match=rf"^{re.escape(str(path))}:18: YAML syntax error"):
         EUROC.open(tiny)
 
 

@@ -14,8 +14,6 @@ base temporary folder.
 from __future__ import annotations
 
 import json
-import resource
-import signal
 import subprocess
 import sys
 import time
@@ -23,13 +21,12 @@ import tracemalloc
 import warnings
 from collections import Counter
 from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pytest
 from experiment_fuzz_configs import EXAMPLES, FOLDER, alias_bomb, raw_configs, schema_configs
+from fuzz_limits import Hang, memory_limit, peak_rss, time_limit
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -40,7 +37,6 @@ from sal_adapters.images import write_image
 
 CONFIG = "c.yaml"  # read from the working folder, so messages start with this short name
 SECONDS = 2.0  # of CPU time per config
-WALL_FACTOR = 30  # a config blocked this many times SECONDS on the clock hangs
 MEMORY = 200 * 2**20  # bytes of address space a config may take (beyond: MemoryError)
 LINE = 300  # characters of an error message
 FUZZ = settings(derandomize=True, database=None, deadline=None, suppress_health_check=list(HealthCheck), print_blob=False)
@@ -48,48 +44,6 @@ FUZZ = settings(derandomize=True, database=None, deadline=None, suppress_health_
 #: What the fuzz saw: configs tried, each outcome in all and by strategy, the slowest, the alias bomb.
 TALLY: Counter[str] = Counter()
 OUTCOMES = ("clean errors", "plans", "tracebacks", "hangs", "over memory", "bad lines")
-
-
-class Hang(BaseException):
-    """A config still being checked after ``SECONDS`` (a BaseException: no ``except Exception`` hides it)."""
-
-
-@contextmanager
-def time_limit(seconds: float) -> Iterator[None]:
-    """Raise ``Hang`` in the block after ``seconds`` of this process's CPU time (the bound does
-    not move with the machine's load), or after ``WALL_FACTOR`` times as long on the clock (a
-    config that blocks without computing)."""
-
-    def expire(signum: int, frame: Any) -> None:
-        raise Hang(f"still running after {seconds} s of CPU time" if signum == signal.SIGPROF else f"blocked for {seconds * WALL_FACTOR} s")
-
-    previous = {sig: signal.signal(sig, expire) for sig in (signal.SIGPROF, signal.SIGALRM)}
-    signal.setitimer(signal.ITIMER_PROF, seconds)
-    signal.setitimer(signal.ITIMER_REAL, seconds * WALL_FACTOR)
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_PROF, 0)
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
-
-
-@contextmanager
-def memory_limit(extra: int) -> Iterator[None]:
-    """Let the block take at most ``extra`` more bytes of address space (then ``MemoryError``)."""
-    soft, hard = resource.getrlimit(resource.RLIMIT_AS)
-    in_use = int(Path("/proc/self/statm").read_text().split()[0]) * resource.getpagesize()
-    resource.setrlimit(resource.RLIMIT_AS, (in_use + extra if hard == resource.RLIM_INFINITY else min(hard, in_use + extra), hard))
-    try:
-        yield
-    finally:
-        resource.setrlimit(resource.RLIMIT_AS, (soft, hard))
-
-
-def peak_rss() -> int:
-    """The process's peak resident memory so far, in bytes."""
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
 
 
 def is_one_line(message: str) -> bool:

@@ -172,7 +172,7 @@ def test_camera_yaml_round_trip(tmp_path: Path) -> None:
     ("text", "line", "message"),
     [
         ("fx: 8\nfy: 8\ncx: 3.5\ncy: 2.5\nfocal: 3\n", 5, "unknown key 'focal'"),
-        ("fx: 8\nfy: [1\ncx: 3.5\n", 3, "invalid YAML"),
+        ("fx: 8\nfy: [1\ncx: 3.5\n", 3, "YAML syntax error"),
         ("fx: 8\nfy: eight\ncx: 3.5\ncy: 2.5\n", 2, "fy: expected a number, got 'eight'"),
         ("fx: 8\nfy: 8\ncx: 3.5\ncy: 2.5\nwidth: 640\n", 5, "width is 640 px but the images are 8x6 px"),
         ("fx: 8\nfy: 8\ncx: 3.5\ncy: 2.5\ndistortion: [1, 2]\n", 5, "distortion must be a list of 4, 5, 8, 12, 14 numbers"),

@@ -43,7 +43,8 @@ from pytest_sal.experiment.schema import (
     build_module,
 )
 from pytest_sal.experiment.value_checks import ValueChecks, is_finite, is_number, option_hints
-from pytest_sal.experiment.yaml_loader import PATH_CHARS, QUOTE_CHARS, ConfigError, key_text, one_line, quote, read_yaml
+from pytest_sal.experiment.yaml_loader import PATH_CHARS, ConfigError, key_text, read_yaml
+from sal_adapters.bounded_yaml import QUOTE_CHARS, one_line, quote
 from sal_adapters.datasets import DATASETS, open_dataset
 from sal_adapters.errors import SalError
 from sal_adapters.suggest import suggestion
@@ -73,7 +74,7 @@ def load_config(path: str | os.PathLike[str]) -> ExperimentConfig:
 
 def parse_config(text: str, source: str = "<config>") -> ExperimentConfig:
     """Validate the YAML ``text`` (``source`` names it in errors) within the limits of
-    ``pytest_sal.experiment.yaml_loader`` and the schema's."""
+    ``CONFIG_YAML`` (``pytest_sal.experiment.yaml_loader``) and the schema's."""
     data = read_yaml(text, source)
     return _Parser(source).config(data, text)
 
