@@ -23,7 +23,7 @@ from sal_adapters.errors import DatasetError, DatasetWarning
 from sal_adapters.images import IMAGE_SUFFIXES, read_image, write_image
 from sal_adapters.layout_io import fps_from_timestamps
 from sal_adapters.sequence import Frame, FrameRecord, Sequence
-from sal_adapters.textfiles import atomic_write_text, read_rows
+from sal_adapters.textfiles import atomic_write_text, iter_rows, read_rows
 from sal_adapters.trajectory import Trajectory, read_times, write_times
 
 __all__ = ["KITTI", "KittiDataset", "read_calib"]
@@ -234,7 +234,7 @@ def _image_files(folder: Path) -> list[Path]:
 
 def _times_for_poses(poses_path: Path, times: np.ndarray) -> np.ndarray:
     """One timestamp per pose row: the frame times (the file must have a row per frame)."""
-    rows = len(read_rows(poses_path))
+    rows = sum(1 for _ in iter_rows(poses_path))
     if rows != len(times):
         raise DatasetError(f"{rows} poses for {len(times)} frames (one 3x4 pose per frame expected)", poses_path)
     return times

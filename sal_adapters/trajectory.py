@@ -7,6 +7,7 @@ Trajectories are immutable: every operation returns a new one, arrays are read-o
 
 from __future__ import annotations
 
+from array import array
 from collections.abc import Sequence as SequenceABC
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,8 +21,8 @@ from sal_adapters.textfiles import (
     atomic_write_text,
     check_times,
     format_float,
+    iter_rows,
     read_numeric_table,
-    read_rows,
 )
 
 if TYPE_CHECKING:
@@ -179,10 +180,9 @@ class Trajectory:
     def read_euroc(cls, path: str | Path) -> Trajectory:
         """Read an EuRoC ground-truth CSV: ``ns, px, py, pz, qw, qx, qy, qz[, ...]``."""
         path = Path(path)
-        rows = read_rows(path, delimiter=",")
-        stamps, values = [], []
+        stamps, values = array("d"), array("d")
         width = None
-        for number, fields in rows:
+        for number, fields in iter_rows(path, delimiter=","):
             if len(fields) < 8 or (width is not None and len(fields) != width):
                 raise DatasetError(
                     f"expected {width or 'at least 8'} comma-separated values (timestamp [ns], p_x p_y p_z [m], q_w q_x q_y q_z), got {len(fields)}",
@@ -192,13 +192,13 @@ class Trajectory:
             width = len(fields)
             try:
                 stamps.append(parse_ns(fields[0]) * 1e-9)
-                values.append([float(v) for v in fields[1:8]])
+                values.extend([float(v) for v in fields[1:8]])
             except ValueError as exc:
                 raise DatasetError(f"expected numbers ({exc})", path, number) from None
         if not values:
             raise DatasetError("no poses found", path)
-        table = np.asarray(values)
-        return _checked(cls, np.asarray(stamps), table[:, 0:3], table[:, [4, 5, 6, 3]], path)
+        table = np.frombuffer(values, dtype=np.float64).reshape(-1, 7)
+        return _checked(cls, np.frombuffer(stamps, dtype=np.float64), table[:, 0:3], table[:, [4, 5, 6, 3]], path)
 
     def write_euroc(self, path: str | Path) -> None:
         """Write an EuRoC CSV with integer nanosecond timestamps."""

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from sal_wrappers.capped_log import CappedLog
 from sal_wrappers.process_group import RunGuard, wait_unreaped
 
 __all__ = ["ChildOutcome", "describe_exit", "log_tail", "run_child", "write_result"]
@@ -97,7 +98,8 @@ def run_child(
     """Run ``entry`` in a child process fed ``header`` and ``frames`` (see the module text).
 
     ``timeout`` (s) covers the whole run; past it the child is killed. The log is
-    ``workdir/log_name``; the result file ``workdir/<log stem>.result.json``. What the child
+    ``workdir/log_name`` (at most ``sal_wrappers.capped_log.MAX_LOG_BYTES``: the beginning and
+    the end); the result file ``workdir/<log stem>.result.json``. What the child
     leaves behind when it exits is killed, and all of it when the calling process dies first
     (``sal_wrappers.process_group.RunGuard``).
     """
@@ -108,16 +110,16 @@ def run_child(
     result_path.unlink(missing_ok=True)
     start = time.monotonic()
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    with RunGuard() as guard:
-        with open(log_path, "wb") as log:
-            process = subprocess.Popen(
-                [sys.executable, "-m", "sal_wrappers.child_process", entry, str(result_path)],
-                stdin=subprocess.PIPE,
-                stdout=log,
-                stderr=subprocess.STDOUT,
-                env=guard.environ(env),
-                start_new_session=True,
-            )
+    with CappedLog(log_path) as log, RunGuard() as guard:
+        process = subprocess.Popen(
+            [sys.executable, "-m", "sal_wrappers.child_process", entry, str(result_path)],
+            stdin=subprocess.PIPE,
+            stdout=log.fd,
+            stderr=subprocess.STDOUT,
+            env=guard.environ(env),
+            start_new_session=True,
+        )
+        log.detach()
         guard.watch(process.pid)
         status, timed_out, feed_error, cpu = _feed(process, header, frames, timeout, guard.cpu_seconds)
     wall = time.monotonic() - start

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from sal_adapters import Trajectory
+from sal_adapters.textfiles import iter_rows, read_numeric_table
 from sal_wrappers.base import TrackState
 
 __all__ = ["ORB_STATES", "TRACKED", "map_states", "read_final_trajectory", "segment_ids", "state_name", "track_state"]
@@ -85,19 +86,12 @@ def read_final_trajectory(path: Path, frame_times: np.ndarray, tolerance_s: floa
     The file has one line per frame, space-separated: ``1e9 * t`` (ns, printed with 6
     decimals; a float64, so absolute EuRoC times are off by up to 256 ns), ``tx ty tz`` (m) and
     ``qx qy qz qw`` (Hamilton, x y z w: TUM order, not EuRoC's w-first). Each time is replaced
-    by the nearest frame time when that is within ``tolerance_s`` (s).
+    by the nearest frame time when that is within ``tolerance_s`` (s). It is read line by line
+    within the limits of ``sal_adapters.textfiles.iter_rows``; a bad line raises ``DatasetError``.
     """
-    rows = []
-    for line in Path(path).read_text().splitlines():
-        fields = line.split()
-        if not fields or fields[0].startswith("#"):
-            continue
-        if len(fields) != 8:
-            raise ValueError(f"{path}: expected 8 values per line (t [ns], tx ty tz, qx qy qz qw), got {len(fields)}")
-        rows.append([float(v) for v in fields])
-    if not rows:
+    if next(iter_rows(path), None) is None:
         raise ValueError(f"{path}: no poses")
-    table = np.asarray(rows)
+    table, _ = read_numeric_table(path, 8, what="values (t [ns], tx ty tz, qx qy qz qw)")
     times = table[:, 0] * 1e-9
     frame_times = np.sort(np.asarray(frame_times, dtype=np.float64))
     if len(frame_times):

@@ -21,6 +21,7 @@ from types import TracebackType
 from typing import NamedTuple
 
 from sal_wrappers import watchdog
+from sal_wrappers.capped_log import CappedLog
 
 __all__ = ["KILL_GRACE_S", "GroupRun", "RunGuard", "process_cpu_seconds", "run_process_group", "wait_unreaped"]
 
@@ -157,7 +158,8 @@ def wait_unreaped(process: subprocess.Popen[bytes]) -> None:
 
 
 def run_process_group(command: list[str], cwd: Path, env: dict[str, str], log_path: Path, timeout: float | None) -> GroupRun:
-    """Run ``command`` in its own process group with stdout and stderr to ``log_path``.
+    """Run ``command`` in its own process group with stdout and stderr to ``log_path`` (at most
+    ``sal_wrappers.capped_log.MAX_LOG_BYTES`` of it: the beginning and the end).
 
     Returns a ``GroupRun``; past ``timeout`` the group gets
     SIGTERM, then SIGKILL after ``KILL_GRACE_S``. Whatever is left of the group when the program
@@ -165,16 +167,14 @@ def run_process_group(command: list[str], cwd: Path, env: dict[str, str], log_pa
     when the calling process dies first, the run's watchdog kills them all.
     """
     start = time.monotonic()
-    with RunGuard() as guard, open(log_path, "wb") as log:
-        log.write(f"$ {shlex.join(command)}\n".encode())
-        log.flush()
+    with CappedLog(log_path, header=f"$ {shlex.join(command)}\n".encode()) as log, RunGuard() as guard:
         try:
             process = subprocess.Popen(
                 command,
                 cwd=cwd,
                 env=guard.environ(env),
                 stdin=subprocess.DEVNULL,
-                stdout=log,
+                stdout=log.fd,
                 stderr=subprocess.STDOUT,
                 start_new_session=True,
             )
@@ -187,6 +187,7 @@ def run_process_group(command: list[str], cwd: Path, env: dict[str, str], log_pa
             )
         except OSError as exc:
             return GroupRun(None, False, time.monotonic() - start, f"could not start {command[0]!r}: {exc.strerror or exc}")
+        log.detach()
         guard.watch(process.pid)
         timed_out, cpu = False, None
         try:

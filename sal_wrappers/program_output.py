@@ -13,7 +13,7 @@ from scipy.spatial.transform import Rotation
 
 from sal_adapters import Trajectory
 from sal_adapters.errors import DatasetError
-from sal_adapters.textfiles import read_numeric_table, read_rows
+from sal_adapters.textfiles import check_size, iter_rows, read_numeric_table
 from sal_adapters.trajectory import read_times
 from sal_wrappers.base import TrackState
 
@@ -43,7 +43,7 @@ def read_output(path: Path, output_format: str, time_unit: str, frame_times: np.
     empty = Trajectory(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 4)))
     if output_format == "json":
         return _read_json(path, scale)
-    if not read_rows(path, delimiter="," if output_format == "euroc" else None):
+    if next(iter_rows(path, delimiter="," if output_format == "euroc" else None), None) is None:
         return empty
     if output_format == "tum":
         return _rescaled(Trajectory.read_tum(path), scale)
@@ -117,6 +117,7 @@ def _rescaled(trajectory: Trajectory, scale: float) -> Trajectory:
 
 def _read_json(path: Path, scale: float) -> Trajectory:
     try:
+        check_size(path, path.stat().st_size)  # read whole: within the limit of the other formats
         data = json.loads(path.read_text(encoding="utf-8"))
     except json.JSONDecodeError as exc:
         raise DatasetError(f"not valid JSON ({exc.msg}, column {exc.colno})", path, exc.lineno) from None
