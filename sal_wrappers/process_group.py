@@ -156,9 +156,7 @@ def wait_unreaped(process: subprocess.Popen[bytes]) -> None:
         process.wait()
 
 
-def run_process_group(
-    command: list[str], cwd: Path, env: dict[str, str], log_path: Path, timeout: float | None
-) -> GroupRun:
+def run_process_group(command: list[str], cwd: Path, env: dict[str, str], log_path: Path, timeout: float | None) -> GroupRun:
     """Run ``command`` in its own process group with stdout and stderr to ``log_path``.
 
     Returns a ``GroupRun``; past ``timeout`` the group gets
@@ -184,7 +182,9 @@ def run_process_group(
             where = "not on PATH" if os.sep not in command[0] else "no such file"
             return GroupRun(None, False, time.monotonic() - start, f"executable not found: {command[0]!r} ({where})")
         except PermissionError:
-            return GroupRun(None, False, time.monotonic() - start, f"executable {command[0]!r} cannot be run (permission denied; is it executable?)")
+            return GroupRun(
+                None, False, time.monotonic() - start, f"executable {command[0]!r} cannot be run (permission denied; is it executable?)"
+            )
         except OSError as exc:
             return GroupRun(None, False, time.monotonic() - start, f"could not start {command[0]!r}: {exc.strerror or exc}")
         guard.watch(process.pid)
