@@ -1,23 +1,28 @@
-"""Reading an experiment config's YAML safely: a SafeLoader that refuses duplicate keys and
-values YAML cannot make, limits on size, nesting and alias expansion checked before anything is
-built, and error messages of one line that quote at most a few dozen characters of a value.
+"""Reading an experiment config's YAML safely: the file checked (a regular file within the
+size limit) before it is read, a SafeLoader that refuses duplicate keys and values YAML cannot
+make, limits on size, nesting, values and alias expansion checked while the YAML is composed,
+before anything is built, and error messages of one line that quote at most a few dozen
+characters of a value.
 """
 
 from __future__ import annotations
 
+import os
 import re
-import reprlib
+import stat
 from collections.abc import Hashable
 from typing import Any
 
 import yaml
 
 from sal_adapters import SalError
+from sal_adapters.quoting import short_repr
 
 __all__ = [
     "MAX_CONFIG_BYTES",
     "MAX_DEPTH",
     "MAX_VALUES",
+    "MAX_WRITTEN_VALUES",
     "NAME_CHARS",
     "PATH_CHARS",
     "QUOTE_CHARS",
@@ -25,6 +30,7 @@ __all__ = [
     "key_text",
     "one_line",
     "quote",
+    "read_config_text",
     "read_yaml",
     "type_name",
 ]
@@ -39,12 +45,15 @@ class ConfigError(SalError, ValueError):
         super().__init__(f"{source}: {where}: {message}" if where else f"{source}: {message}")
 
 
-#: Limits a config's YAML is checked against before anything is built: the file's size, how
-#: deep mappings and lists nest, and the values it holds once YAML aliases are expanded (a
+#: Limits a config's YAML is checked against before anything is built: the file's size (bytes,
+#: checked before it is read), how deep mappings and lists nest, and the values (scalars,
+#: lists, mappings) it holds: as written, counted while composing, so a 1 MB flow list stops
+#: at the limit (255 composite steps are about 2500), and once YAML aliases are expanded (a
 #: "billion laughs" alias chain holds 10^9).
 MAX_CONFIG_BYTES = 1_000_000
 MAX_DEPTH = 32
 MAX_VALUES = 100_000
+MAX_WRITTEN_VALUES = 20_000
 #: Characters of a value quoted in an error message, and of a key or a name that names nothing known.
 QUOTE_CHARS = 80
 NAME_CHARS = 40
@@ -65,12 +74,19 @@ class _UniqueKeyLoader(yaml.SafeLoader):
     ``MAX_DEPTH`` while it composes (before Python's recursion limit)."""
 
     depth = 0
+    nodes = 0
 
     def compose_node(self, parent: Any, index: Any) -> Any:
         self.depth += 1
+        self.nodes += 1
         try:
             if self.depth > MAX_DEPTH:
                 raise _TooBig(f":{self.peek_event().start_mark.line + 1}", f"nested deeper than {MAX_DEPTH} levels; a config needs a few")
+            if self.nodes > MAX_WRITTEN_VALUES:
+                raise _TooBig(
+                    f":{self.peek_event().start_mark.line + 1}",
+                    f"holds more than {MAX_WRITTEN_VALUES} values; a config needs a few hundred",
+                )
             return super().compose_node(parent, index)
         finally:
             self.depth -= 1
@@ -142,8 +158,7 @@ def _check_size(node: yaml.Node) -> None:
 
 def quote(value: Any, limit: int = QUOTE_CHARS) -> str:
     """``repr(value)``, cut to ``limit`` characters (errors quote, they do not dump)."""
-    text = reprlib.repr(value) if isinstance(value, (dict, list, tuple, set)) else repr(value)
-    return text if len(text) <= limit else text[: limit - 3] + "..."
+    return short_repr(value, limit)
 
 
 _KEY = re.compile(rf"[A-Za-z0-9_.-]{{1,{NAME_CHARS}}}")
@@ -158,6 +173,45 @@ def one_line(text: str, limit: int = 2 * QUOTE_CHARS) -> str:
     """``text`` as one printable line (other characters escaped) of at most ``limit`` characters."""
     text = "".join(c if c.isprintable() else repr(c)[1:-1] for c in text[:limit])
     return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def read_config_text(path: str | os.PathLike[str]) -> str:
+    """The UTF-8 text of the config file at ``path``, checked before it is read: a regular file
+    (not a FIFO, a device such as ``/dev/zero``, a folder) of at most ``MAX_CONFIG_BYTES``
+    bytes; at most that many bytes (and one) are read, should it grow meanwhile. Any problem is
+    one ``ConfigError`` naming the file."""
+    source = str(path)
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)  # O_NONBLOCK: a FIFO without writer opens
+    except FileNotFoundError:
+        raise ConfigError(source, "", "config file not found") from None
+    except OSError as exc:
+        raise ConfigError(source, "", f"cannot read the config: {exc.strerror}") from None
+    try:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode):
+            raise ConfigError(source, "", f"is {_file_kind(info.st_mode)}, not a regular file; give the config's YAML file")
+        if info.st_size > MAX_CONFIG_BYTES:
+            raise ConfigError(source, "", f"the config is {info.st_size} bytes; the limit is {MAX_CONFIG_BYTES} bytes")
+        data = os.read(fd, MAX_CONFIG_BYTES + 1)
+    except OSError as exc:
+        raise ConfigError(source, "", f"cannot read the config: {exc.strerror}") from None
+    finally:
+        os.close(fd)
+    if len(data) > MAX_CONFIG_BYTES:
+        raise ConfigError(
+            source, "", f"the config grew past {MAX_CONFIG_BYTES} bytes while it was read; the limit is {MAX_CONFIG_BYTES} bytes"
+        )
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(source, "", f"cannot read the config: {exc}") from None
+
+
+def _file_kind(mode: int) -> str:
+    """What a file of ``mode`` is, in words (``a folder``, ``a FIFO``)."""
+    kinds = ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"))
+    return next((words for test, words in kinds if test(mode)), "a socket" if stat.S_ISSOCK(mode) else "not a file")
 
 
 def read_yaml(text: str, source: str = "<config>") -> Any:
