@@ -9,6 +9,12 @@ copy being built) or ``.NAME.sal-old-PID-HEX`` (an old version moved aside): the
 replacement in that folder removes those of processes that are gone, and first puts an old
 version back when its name is empty (the run died between the two renames).
 
+Several outputs of one run that must switch as one generation (``sal perturb``'s
+``images/<perturbation>/``, ``pipeline_results.json`` and ``config.yaml``) are staged in one
+copy of the folder that holds them all, completed at commit with hard links to that folder's
+other files, and swapped in with the one step above (``Replacement(within=FOLDER)``): folder by
+folder, a kill between two swaps would leave new and old outputs side by side.
+
 New files and folders are created with modes 0666 and 0777, which the kernel reduces by the
 process umask (0644 and 0755 under umask 022; private under 077), never ``mkstemp``'s 0600.
 Any ``OSError`` while writing becomes one ``WriteError`` naming the path.
@@ -75,10 +81,19 @@ class Replacement:
 
     ``with Replacement() as outputs:`` commits when the block ends without error and removes
     the staged copies otherwise, so the old outputs stay as they were.
+
+    ``Replacement(within=root)``: every output lies under the folder ``root`` and they switch
+    as one generation. They are staged in one copy of ``root`` beside it; ``commit`` hard-links
+    (where the file system cannot: copies) every other file of the current ``root`` into that
+    copy and swaps the copy in with one exchange, so a kill at any moment leaves the old
+    generation or the new one, never a mix (between two renames, where the exchange is missing,
+    ``recover`` puts the old one back). Files in the copy are never written in place.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, within: str | os.PathLike[str] | None = None) -> None:
         self._staged: list[tuple[Path, Path, bool]] = []  # (staging, target, entries)
+        self._within = None if within is None else Path(within)
+        self._tree: Path | None = None  # the staged copy of ``within``
 
     def __enter__(self) -> Replacement:
         return self
@@ -103,7 +118,7 @@ class Replacement:
     def folder(self, target: str | os.PathLike[str]) -> Path:
         """A new empty folder to fill; it replaces the folder ``target`` at commit."""
         target = Path(target)
-        return self._stage(target.parent, _hidden(target, "tmp"), target, entries=False)
+        return self._stage(target.parent, self._staging(target), target, entries=False)
 
     def entries(self, directory: str | os.PathLike[str]) -> Path:
         """A new empty folder whose top-level files and folders each replace the entry of the
@@ -115,13 +130,34 @@ class Replacement:
     def write_text(self, target: str | os.PathLike[str], text: str) -> Path:
         """Stage the file ``target`` holding ``text`` (UTF-8); it replaces ``target`` at commit."""
         target = Path(target)
-        staging = self._stage(target.parent, _hidden(target, "tmp"), target, entries=False, folder=False)
+        staging = self._stage(target.parent, self._staging(target), target, entries=False, folder=False)
         with writing(target):
             staging.write_text(text, encoding="utf-8", newline="\n")
         return target
 
+    def _staging(self, target: Path) -> Path:
+        """Where ``target`` is staged: beside it, or at its place in the staged copy of ``within``."""
+        if self._within is None:
+            return _hidden(target, "tmp")
+        if self._within not in target.parents:
+            raise ValueError(f"{target} is not inside {self._within}, the folder this replacement switches")
+        with writing(target):
+            for folder in target.parents:  # a file where a folder of the output belongs is the user's: refused
+                if folder == self._within.parent:
+                    break
+                if os.path.lexists(folder) and not folder.is_dir():
+                    raise FileExistsError(errno.EEXIST, os.strerror(errno.EEXIST), str(folder))
+            if self._tree is None:
+                self._within.parent.mkdir(parents=True, exist_ok=True)
+                recover(self._within.parent)
+                self._tree = _hidden(self._within, "tmp")
+                self._tree.mkdir()
+        return self._tree / target.relative_to(self._within)
+
     def _stage(self, parent: Path, staging: Path, target: Path, entries: bool, folder: bool = True) -> Path:
         with writing(target):
+            if self._tree is not None:
+                parent = staging.parent
             parent.mkdir(parents=True, exist_ok=True)
             recover(parent)
             self._staged.append((staging, target, entries))
@@ -132,8 +168,15 @@ class Replacement:
         return staging
 
     def commit(self) -> None:
-        """Flush every staged output to disk, rename each into place, then remove the old
-        versions (after an error: the staged copies not yet in place)."""
+        """Flush every staged output to disk, rename each into place (``within``: the staged
+        copy, completed with the current folder's other files, in one swap), then remove the
+        old versions (after an error: the staged copies not yet in place)."""
+        if self._within is not None and self._tree is not None:
+            parts = {staging for staging, _, _ in self._staged}
+            tree, self._staged = self._tree, [(self._tree, self._within, False)]
+            with writing(self._within):
+                if self._within.is_dir():
+                    _link_tree(self._within, tree, parts)
         moves: list[tuple[Path, Path]] = []
         for staging, target, entries in self._staged:
             if entries:  # folders before files: a page's assets before the page
@@ -162,6 +205,9 @@ class Replacement:
         for staging, _, _ in self._staged:
             _remove(staging)
         self._staged.clear()
+        if self._tree is not None:
+            _remove(self._tree)
+            self._tree = None
 
 
 @contextmanager
@@ -191,6 +237,33 @@ def copy_tree(source: str | os.PathLike[str], target: str | os.PathLike[str]) ->
         out.mkdir(parents=True, exist_ok=True)
         for name in names:
             shutil.copyfile(os.path.join(folder, name), out / name)
+
+
+def _link_tree(old: Path, new: Path, parts: set[Path]) -> None:
+    """Complete ``new`` with every entry of ``old`` it lacks: folders made, files hard-linked
+    (copied where the file system has no hard links), symbolic links recreated; the staged
+    outputs ``parts`` (paths in ``new``) are left as they are, and leftovers of replacements
+    (``.NAME.sal-tmp-...``) are not carried over."""
+    with os.scandir(old) as found:
+        entries = list(found)
+    for entry in entries:
+        target = new / entry.name
+        if _LEFTOVER.fullmatch(entry.name) or target in parts:
+            continue
+        if entry.is_dir(follow_symlinks=False):
+            if not os.path.lexists(target):
+                target.mkdir()
+            if target.is_dir() and not target.is_symlink():
+                _link_tree(Path(entry.path), target, parts)
+        elif os.path.lexists(target):
+            continue
+        elif entry.is_symlink():
+            os.symlink(os.readlink(entry.path), target)
+        else:
+            try:
+                os.link(entry.path, target)
+            except OSError:  # no hard links here (some network and FUSE file systems)
+                shutil.copy2(entry.path, target)
 
 
 def recover(folder: str | os.PathLike[str]) -> None:

@@ -9,7 +9,6 @@ its ``ConfigError``, the dataset readers (``read_dataset_yaml``) into a ``Datase
 
 from __future__ import annotations
 
-import reprlib
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,6 +17,7 @@ from typing import Any
 import yaml
 
 from sal_adapters.errors import DatasetError, SalError
+from sal_adapters.quoting import short_repr
 from sal_adapters.textfiles import read_text
 
 __all__ = [
@@ -40,13 +40,15 @@ QUOTE_CHARS = 80
 @dataclass(frozen=True)
 class YamlLimits:
     """What a YAML file is checked against before anything is built: its size (bytes), how deep
-    mappings and lists nest, and the values it holds once aliases are expanded (a "billion
-    laughs" alias chain holds 10^9); ``what`` names the file in messages (``a config``)."""
+    mappings and lists nest, the values it holds once aliases are expanded (a "billion laughs"
+    alias chain holds 10^9) and, when given, as written (counted while it is composed, so a
+    long flow list stops at the limit); ``what`` names the file in messages (``a config``)."""
 
     max_bytes: int
     what: str
     max_depth: int = 32
     max_values: int = 100_000
+    max_written_values: int | None = None
 
 
 #: Limits of a dataset's YAML (EuRoC ``sensor.yaml``, a folder's ``camera.yaml``): a real one
@@ -80,9 +82,9 @@ def type_name(value: Any) -> str:
 
 
 def quote(value: Any, limit: int = QUOTE_CHARS) -> str:
-    """``repr(value)``, cut to ``limit`` characters (errors quote, they do not dump)."""
-    text = reprlib.repr(value) if isinstance(value, (dict, list, tuple, set)) else repr(value)
-    return text if len(text) <= limit else text[: limit - 3] + "..."
+    """``repr(value)``, cut to ``limit`` characters (errors quote, they do not dump; an integer
+    of thousands of digits is shown by its number of digits)."""
+    return short_repr(value, limit)
 
 
 def one_line(text: str, limit: int = 2 * QUOTE_CHARS) -> str:
@@ -101,9 +103,11 @@ class _TooBig(Exception):
 
 class _BoundedLoader(yaml.SafeLoader):
     """SafeLoader that refuses a key given twice in one mapping, and nesting deeper than
-    ``limits.max_depth`` while it composes (before Python's recursion limit)."""
+    ``limits.max_depth`` or more values than ``limits.max_written_values`` while it composes
+    (before Python's recursion limit, before a long list is built)."""
 
     depth = 0
+    nodes = 0
 
     def __init__(self, text: str, limits: YamlLimits):
         super().__init__(text)
@@ -111,9 +115,15 @@ class _BoundedLoader(yaml.SafeLoader):
 
     def compose_node(self, parent: Any, index: Any) -> Any:
         self.depth += 1
+        self.nodes += 1
         try:
             if self.depth > self.limits.max_depth:
                 raise _TooBig(self.peek_event().start_mark.line + 1, _too_deep(self.limits))
+            written = self.limits.max_written_values
+            if written is not None and self.nodes > written:
+                raise _TooBig(
+                    self.peek_event().start_mark.line + 1, f"holds more than {written} values; {self.limits.what} needs a few hundred"
+                )
             return super().compose_node(parent, index)
         finally:
             self.depth -= 1

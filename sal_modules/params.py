@@ -14,12 +14,12 @@ from __future__ import annotations
 
 import math
 import numbers
-import reprlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
 from sal_adapters.json_values import json_safe
+from sal_adapters.quoting import short_repr
 from sal_modules.errors import ParameterError
 from sal_modules.param_refs import Bound, ParamRef
 
@@ -218,23 +218,24 @@ class Param:
         converted = checker(value)
         if converted is _INVALID:
             where = f"{module}: " if module else ""
-            quoted = reprlib.repr(value) if isinstance(value, (list, tuple, dict, set)) else repr(value)
-            quoted = quoted if len(quoted) <= 80 else quoted[:77] + "..."
+            quoted = short_repr(value)
             shown = f"{quoted}{' ' + self.unit if self.unit and _is_number(value) else ''}"
             doc = f" ({self.doc})" if self.doc else ""
             raise ParameterError(f"{where}{self.name} = {shown} is not valid; {self.name}{doc} must be {self.allowed()}")
         return converted
 
-    def _in_range(self, x: float) -> bool:
-        return math.isfinite(x) and (self.min is None or x >= self.min) and (self.max is None or x <= self.max)
+    def _in_range(self, x: float | None) -> bool:
+        return x is not None and math.isfinite(x) and (self.min is None or x >= self.min) and (self.max is None or x <= self.max)
 
     def _check_continuous(self, value: Any) -> Any:
-        return float(value) if _is_number(value) and self._in_range(float(value)) else _INVALID
+        x = _as_float(value)
+        return x if self._in_range(x) else _INVALID
 
     def _check_integer(self, value: Any) -> Any:
-        if not _is_number(value) or not math.isfinite(float(value)) or float(value) != int(value):
+        x = _as_float(value)
+        if x is None or not math.isfinite(x) or x != int(value):
             return _INVALID
-        return int(value) if self._in_range(float(value)) else _INVALID
+        return int(value) if self._in_range(x) else _INVALID
 
     def _check_choice(self, value: Any) -> Any:
         return value if value in (self.choices or ()) and not isinstance(value, bool) else _INVALID
@@ -242,7 +243,7 @@ class Param:
     def _check_vector(self, value: Any) -> Any:
         if isinstance(value, (str, bytes)) or not isinstance(value, Sequence) or len(value) != self.length:
             return _INVALID
-        if not all(_is_number(v) and self._in_range(float(v)) for v in value):
+        if not all(self._in_range(_as_float(v)) for v in value):
             return _INVALID
         return tuple(float(v) for v in value)
 
@@ -261,3 +262,14 @@ _INVALID = object()
 
 def _is_number(value: Any) -> bool:
     return isinstance(value, numbers.Real) and not isinstance(value, bool)
+
+
+def _as_float(value: Any) -> float | None:
+    """``value`` as a float; ``None`` for a non-number and for an integer beyond any float
+    (``float`` would raise ``OverflowError`` on 4000 digits)."""
+    if not _is_number(value):
+        return None
+    try:
+        return float(value)
+    except OverflowError:
+        return None

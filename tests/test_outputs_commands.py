@@ -126,7 +126,7 @@ def _kill_after(seconds: float) -> Callable[[Path], None]:
 
 def _kill_when_staging(root: Path) -> None:
     deadline = time.monotonic() + 120
-    while not list((root / "images").glob(".*.sal-tmp-*")):
+    while not list(root.parent.glob(f".{root.name}.sal-tmp-*/images/*")):
         assert time.monotonic() < deadline, "no staging folder appeared"
         time.sleep(0.005)
 
@@ -191,14 +191,15 @@ def test_kill_9_of_a_rerun_keeps_the_previous_output(tmp_path: Path, children: l
     while not flag.exists():
         assert process.poll() is None and time.monotonic() < deadline, "the child ended or never staged its outputs"
         time.sleep(0.01)
-    assert len(leftovers(root)) == 5  # three sequences and two files, staged complete
+    staged = root.parent / leftovers(root.parent)[0]  # one staged copy of the experiment folder
+    assert leftovers(root.parent) == [staged.name] and {"fog", "rain", "drop"} <= set(os.listdir(staged / "images"))
     process.send_signal(signal.SIGKILL)
     process.wait()
     assert snapshot(root) == before, "kill -9 just before the renames changed the previous output"
 
     finished(sal("perturb", new_config, "--cache-dir", tmp_path / "trials-old", cwd=tmp_path))
     after = snapshot(root)
-    assert leftovers(root) == []  # the killed runs' staging folders are gone
+    assert leftovers(root.parent) == []  # the killed runs' staging folders are gone
     assert set(after) == set(before) and after["images/rain/sal_sequence.json"] == before["images/rain/sal_sequence.json"]
     assert after["images/fog/image_left/000000.png"] != before["images/fog/image_left/000000.png"]  # the new fog
     assert "visibility_m: 25" in (root / "config.yaml").read_text()

@@ -16,7 +16,6 @@ The schema is the paper's (``experiment``, ``dataset``, ``perturbations`` with `
 from __future__ import annotations
 
 import os
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from pytest_sal.experiment.boundary_block import read_boundary
@@ -26,6 +25,7 @@ from pytest_sal.experiment.schema import (
     DATASET_KEYS,
     EVALUATION_KEYS,
     EXPERIMENT_KEYS,
+    MAX_INT,
     MAX_KITTI_SEGMENTS,
     MAX_PERTURBATIONS,
     MAX_RENDERED_FRAMES,
@@ -43,7 +43,7 @@ from pytest_sal.experiment.schema import (
     build_module,
 )
 from pytest_sal.experiment.value_checks import ValueChecks, is_finite, is_number, option_hints
-from pytest_sal.experiment.yaml_loader import PATH_CHARS, ConfigError, key_text, read_yaml
+from pytest_sal.experiment.yaml_loader import PATH_CHARS, ConfigError, key_text, read_config_text, read_yaml
 from sal_adapters.bounded_yaml import QUOTE_CHARS, one_line, quote
 from sal_adapters.datasets import DATASETS, open_dataset
 from sal_adapters.errors import SalError
@@ -61,15 +61,9 @@ __all__ = ["ConfigError", "build_modules", "build_sequence", "load_config", "par
 
 
 def load_config(path: str | os.PathLike[str]) -> ExperimentConfig:
-    """Read and validate the experiment config at ``path`` (nothing is created)."""
-    source = str(path)
-    try:
-        text = Path(path).read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError(source, "", "config file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(source, "", f"cannot read the config: {exc}") from None
-    return parse_config(text, source)
+    """Read and validate the experiment config at ``path`` (nothing is created; a file that is
+    not regular or over the size limit is refused before it is read)."""
+    return parse_config(read_config_text(path), str(path))
 
 
 def parse_config(text: str, source: str = "<config>") -> ExperimentConfig:
@@ -104,7 +98,7 @@ class _Parser(ValueChecks):
             name=self.safe_name(d["name"], "experiment.name"),
             description=self.typed(d.get("description", ""), "experiment.description", "str"),
             version=self.typed(version, "experiment.version", "str"),
-            seed=self.typed(d.get("seed", 0), "experiment.seed", "int", minimum=0),
+            seed=self.typed(d.get("seed", 0), "experiment.seed", "int", minimum=0, maximum=MAX_INT),
         )
 
     def dataset(self, value: Any) -> DatasetConfig:
@@ -153,7 +147,7 @@ class _Parser(ValueChecks):
             path=folder,
             sequence=sequence,
             max_frames=self.frame_count(d.get("max_frames"), "dataset.max_frames"),
-            start=self.typed(d.get("start", 0), "dataset.start", "int", minimum=0),
+            start=self.typed(d.get("start", 0), "dataset.start", "int", minimum=0, maximum=MAX_INT),
             stereo=stereo,
             options=options,
         )

@@ -3,8 +3,11 @@ dataset's own layout under ``<base_dir>/<name>/images/<perturbation>/``, through
 cache, with ``pipeline_results.json`` and a copy of the config beside them.
 
 ``plan_perturbations`` builds everything (a dry run renders in memory only);
-``write_perturbations`` writes the plan. The previous output stays whole until every new part
-is complete (``sal_adapters.atomic``).
+``write_perturbations`` writes the plan. Its outputs (``images/<perturbation>/``,
+``pipeline_results.json``, ``config.yaml``) switch as one generation: they are written into a
+staged copy of the experiment folder (``.<name>.sal-tmp-PID-HEX`` beside it) that is swapped in
+whole once complete (``sal_adapters.atomic.Replacement(within=...)``), so a killed run leaves
+the previous generation or the new one, never a mix.
 """
 
 from __future__ import annotations
@@ -90,7 +93,7 @@ def write_perturbations(plan: PerturbPlan, *, cache_dir: Path | None = None, pro
         "status": "running",
         "perturbations": {},
     }
-    with Replacement() as outputs:  # the old output stays whole until every new part is complete
+    with Replacement(within=plan.root) as outputs:  # the old output stays whole; the new one switches in as one
         for name, seq in plan.sequences.items():
             results["perturbations"][name] = _write_one(plan, name, seq, cache, outputs, progress)
         results["status"] = "completed"

@@ -26,6 +26,7 @@ __all__ = [
     "EVALUATION_KEYS",
     "EXPERIMENT_KEYS",
     "MAX_FRAMES",
+    "MAX_INT",
     "MAX_KITTI_SEGMENTS",
     "MAX_NAME_BYTES",
     "MAX_PATH_BYTES",
@@ -194,6 +195,9 @@ MAX_NAME_BYTES = 255
 MAX_SEARCH_TRIALS = 100
 #: The most runs a noisy system's boundary search may make (``robustness_boundary.max_runs``).
 MAX_SEARCH_RUNS = 10_000
+#: The largest integer a config may give either way (int64, what numpy and every JSON reader
+#: keep exactly): ``experiment.seed`` is in 0 .. MAX_INT.
+MAX_INT = 2**63 - 1
 #: Segment lengths of the KITTI metrics (the devkit has 8).
 MAX_KITTI_SEGMENTS = 100
 

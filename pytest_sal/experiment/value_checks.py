@@ -112,14 +112,19 @@ class ValueChecks:
                 raise self.error(f"{prefix}{key}", "is required")
         return value
 
-    def typed(self, value: Any, where: str, kind: str, *, optional: bool = False, minimum: float | None = None) -> Any:
+    def typed(
+        self, value: Any, where: str, kind: str, *, optional: bool = False, minimum: float | None = None, maximum: int | None = None
+    ) -> Any:
+        """``value`` if it is of ``kind`` (``str``, ``bool``, ``int``, ``number``: an int or a
+        float, not an integer beyond any float; ``dict``, ``list``) and within ``minimum`` ..
+        ``maximum``, else one ``ConfigError`` naming ``where``; a number as a float."""
         if value is None and optional:
             return None
         ok = {
             "str": isinstance(value, str),
             "bool": isinstance(value, bool),
             "int": isinstance(value, int) and not isinstance(value, bool),
-            "number": is_number(value),
+            "number": is_number(value) and (isinstance(value, float) or is_finite(value)),  # NaN: the caller's words
             "dict": isinstance(value, dict),
             "list": isinstance(value, list),
         }[kind]
@@ -133,9 +138,11 @@ class ValueChecks:
         }[kind]
         if minimum is not None:
             words += f" >= {minimum:g}"
+        if maximum is not None:
+            words += f" and <= {maximum}" if minimum is not None else f" <= {maximum}"
         if optional:
             words += " or null"
-        if not ok or (minimum is not None and value < minimum):
+        if not ok or (minimum is not None and value < minimum) or (maximum is not None and value > maximum):
             raise self.error(where, f"{quote(value)} is not valid; must be {words}")
         return float(value) if kind == "number" else value
 

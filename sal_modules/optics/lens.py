@@ -21,19 +21,17 @@ __all__ = ["LensEffect", "Overlay"]
 
 
 class LensEffect(Perturbation):
-    """A perturbation with a static per-lens pattern built in ``setup``.
+    """A perturbation with a static per-lens pattern, built when the first frame needs it.
 
     Subclasses implement ``build(stream, height, width)`` (any object, built from
     ``self.rng("pattern", stream)`` only) and use ``self.pattern(stream, image)`` in ``apply``.
+    ``setup`` builds nothing: a chain set up to be checked (``sal perturb --dry-run``, 255
+    steps of ``cracked_lens``) holds no image-sized pattern.
     """
 
     def setup(self, context: ModuleContext) -> None:
         super().setup(context)
         self._patterns: dict[tuple[str, int, int], Any] = {}
-        streams = ["left"] + (["right"] if context.sequence.sensor == "stereo" else [])
-        for stream in streams:
-            camera = context.camera_for(stream)
-            self._pattern(stream, camera.height, camera.width)
 
     def cleanup(self) -> None:
         self._patterns = {}
