@@ -43,7 +43,7 @@ def run_chunk(data: Path, seeds: list[int]) -> tuple[Counter[str], list[str], in
             original = target.file.read_bytes()
             mutate(original, rng).write(target.file)
             try:
-                with time_limit(SECONDS, wall_factor=None), warnings.catch_warnings():
+                with time_limit(SECONDS), warnings.catch_warnings():
                     warnings.simplefilter("ignore")
                     sequence = open_dataset(target.kind, target.folder)
                     for frame in sequence.select(range(min(2, len(sequence)))):

@@ -10,9 +10,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-__all__ = ["WALL_FACTOR", "Hang", "memory_limit", "peak_rss", "time_limit"]
-
-WALL_FACTOR = 30  # an input blocked this many times its CPU seconds on the clock hangs
+__all__ = ["Hang", "memory_limit", "peak_rss", "time_limit"]
 
 
 class Hang(BaseException):
@@ -20,27 +18,21 @@ class Hang(BaseException):
 
 
 @contextmanager
-def time_limit(seconds: float, wall_factor: float | None = WALL_FACTOR) -> Iterator[None]:
-    """Raise ``Hang`` in the block after ``seconds`` of this process's CPU time (the bound does
-    not move with the machine's load), or after ``wall_factor`` times as long on the clock (an
-    input that blocks without computing; ``None``: no bound on the clock)."""
+def time_limit(seconds: float) -> Iterator[None]:
+    """Raise ``Hang`` in the block after ``seconds`` of this process's CPU time: the bound does
+    not move with the machine's load, and no clock bounds an input (a config that is not a
+    regular file is refused before it is read, so no input can block)."""
 
     def expire(signum: int, frame: Any) -> None:
-        raise Hang(
-            f"still running after {seconds} s of CPU time" if signum == signal.SIGPROF else f"blocked for {seconds * (wall_factor or 0)} s"
-        )
+        raise Hang(f"still running after {seconds} s of CPU time")
 
-    previous = {sig: signal.signal(sig, expire) for sig in (signal.SIGPROF, signal.SIGALRM)}
+    previous = signal.signal(signal.SIGPROF, expire)
     signal.setitimer(signal.ITIMER_PROF, seconds)
-    if wall_factor is not None:
-        signal.setitimer(signal.ITIMER_REAL, seconds * wall_factor)
     try:
         yield
     finally:
         signal.setitimer(signal.ITIMER_PROF, 0)
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+        signal.signal(signal.SIGPROF, previous)
 
 
 @contextmanager

@@ -46,7 +46,7 @@ def check(target: Target, seed: int) -> str:
     hostile.write(target.file)
     outcome = "traceback"
     try:
-        with time_limit(SECONDS, wall_factor=None), memory_limit(MEMORY), no_cache_writes(), warnings.catch_warnings():
+        with time_limit(SECONDS), memory_limit(MEMORY), no_cache_writes(), warnings.catch_warnings():
             warnings.simplefilter("ignore")
             read_all(target)
         outcome = "opened"

@@ -187,9 +187,8 @@ def test_kill_9_of_a_rerun_keeps_the_previous_output(tmp_path: Path, children: l
         stderr=subprocess.PIPE,
     )
     children.append(process)
-    deadline = time.monotonic() + 120
-    while not flag.exists():
-        assert process.poll() is None and time.monotonic() < deadline, "the child ended or never staged its outputs"
+    while not flag.exists():  # no clock: the child stages its outputs or ends
+        assert process.poll() is None, "the child ended without staging its outputs"
         time.sleep(0.01)
     staged = root.parent / leftovers(root.parent)[0]  # one staged copy of the experiment folder
     assert leftovers(root.parent) == [staged.name] and {"fog", "rain", "drop"} <= set(os.listdir(staged / "images"))
