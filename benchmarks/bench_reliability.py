@@ -17,7 +17,8 @@ and s50, its runs, and how far apart two sessions' brackets lie. Then the gate: 
 sessions compared pairwise against a baseline (false alarms of boundary:10 %), and sessions of
 a system whose s80 moved 20 % toward the mild side (detections).
 
-Usage: python benchmarks/bench_reliability.py [--sessions 500] [--processes 2]
+Usage: python benchmarks/bench_reliability.py [--sessions 500] [--processes 2] [--truths step ...]
+(``--truths``: only these truths, their votes and the gate pairs among them.)
 """
 
 from __future__ import annotations
@@ -161,6 +162,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sessions", type=int, default=500)
     parser.add_argument("--processes", type=int, default=2)
+    parser.add_argument("--truths", nargs="+", choices=list(TRUTHS), default=list(TRUTHS), help="the truths to simulate (default: all)")
     args = parser.parse_args()
     n = args.sessions
     runs_of: dict[str, list] = {}
@@ -168,7 +170,7 @@ def main() -> None:
     print("| truth | true s80 | interval covers s80 | bound <= s80 | verdicts (passed/failed/inconclusive) | runs (mean) | seconds |")
     print("|---|---:|---:|---:|---|---:|---:|")
     with Pool(args.processes) as pool:
-        for name in TRUTHS:
+        for name in args.truths:
             start = time.perf_counter()
             results = pool.map(reliability_session, [(name, seed) for seed in range(n)])
             s80 = true_s(name, R)
@@ -185,7 +187,7 @@ def main() -> None:
         print("\nThe votes (bisection, before the reliability search) on the same truths:\n")
         print("| truth | bracket holds s80 | bracket holds s50 | brackets of two sessions overlap | runs (mean) | edge flaky |")
         print("|---|---:|---:|---:|---:|---:|")
-        for name in list(TRUTHS)[:3]:
+        for name in [t for t in list(TRUTHS)[:3] if t in args.truths]:
             votes = pool.map(vote_session, [(name, seed) for seed in range(n)])
             s80, s50 = true_s(name, R), true_s(name, 0.5)
             brackets = [(min(p, f), max(p, f)) for p, f, _, _, _ in votes if p is not None and f is not None]
@@ -202,6 +204,8 @@ def main() -> None:
         print("| baseline | this run | comparisons | regressions declared |")
         print("|---|---|---:|---:|")
         for baseline, current in (("logistic", "logistic"), ("plateau", "plateau"), ("logistic", "logistic, s80 20 % milder")):
+            if baseline not in runs_of or current not in runs_of:
+                continue
             pairs = [(runs_of[baseline][i], runs_of[current][i + 1]) for i in range(n - 1)]
             alarms = pool.starmap(gate_alarm, pairs)
             print(f"| {baseline} | {current} | {len(pairs)} | {np.mean(alarms):.3f} |", flush=True)
