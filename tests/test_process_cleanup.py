@@ -153,6 +153,15 @@ def wait_for(check, seconds: float, what: str) -> None:
         time.sleep(0.05)
 
 
+def running(marker: str, count: int, session: subprocess.Popen[bytes]) -> None:
+    """Until ``count`` processes carry ``marker``: READY is written before a double-forked
+    daemon has started, which on a loaded machine takes a while (no clock: the daemon starts,
+    or ``session`` ends and the test fails)."""
+    while len(marked(marker)) < count:
+        assert session.poll() is None, f"the session ended with {len(marked(marker))} of {count} processes started"
+        time.sleep(0.05)
+
+
 def assert_none_left(marker: str, seconds: float = 5.0) -> None:
     deadline = time.monotonic() + seconds
     while (left := marked(marker)) and time.monotonic() < deadline:
@@ -219,7 +228,7 @@ def test_a_killed_pytest_session_leaves_no_slam_process(
     try:
         wait_for(lambda: (tmp_path / "ready").exists() or session.poll() is not None, 60, "the SLAM program did not start")
         assert session.poll() is None, (tmp_path / "pytest.log").read_text()
-        assert len(marked(marker)) >= len(what)  # the program (and its daemon) run
+        running(marker, len(what), session)  # the program (and its daemon) run
         os.kill(session.pid, sig)
         assert session.wait() == -sig
         assert_none_left(marker)
@@ -245,7 +254,7 @@ def test_run_child_leaves_nothing(tmp_path: Path, marker: str, outcome: str) -> 
             assert "outcome 0 None {'frames': 2}" in (tmp_path / "parent.log").read_text()
             assert_none_left(marker, seconds=0.5)  # killed before run_child returned
         else:
-            assert len(marked(marker)) >= 4  # the parent, its watchdog (the parent set the marker before it started), the child, its daemon
+            running(marker, 4, parent)  # the parent, its watchdog (the parent set the marker before it started), the child, its daemon
             os.kill(parent.pid, signal.SIGKILL)
             parent.wait(timeout=10)
             assert_none_left(marker)
