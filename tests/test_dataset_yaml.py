@@ -84,8 +84,8 @@ def test_a_1e8_by_1e8_resolution_is_one_error_naming_the_key(sensor_yaml: Path) 
     [
         ("intrinsics", "[1e300, 458.654, 367.215, 248.375]", "key 'intrinsics': camera fx must be > 0 px and at most 1e+06 px"),
         ("rate_hz", ".inf", "key 'rate_hz' must be a positive number of Hz up to 1e+06, got inf"),
-        ("rate_hz", "1" + "0" * 400, "key 'rate_hz' must be a positive number of Hz up to 1e+06, got 1000000000"),
-        ("T_BS", "[1" + "0" * 400 + "]", "key 'T_BS' must hold 16 numbers (4x4 row-major), got [1000000000"),
+        ("rate_hz", "1" + "0" * 400, "key 'rate_hz' must be a positive number of Hz up to 1e+06, got <an integer of about 401 digits>"),
+        ("T_BS", "[1" + "0" * 400 + "]", "key 'T_BS' must hold 16 numbers (4x4 row-major), got [<an integer of about 401 digits>]"),
     ],
     ids=["huge focal length", "infinite rate", "400-digit rate", "400-digit T_BS"],
 )
@@ -106,4 +106,4 @@ def test_camera_yaml_values_out_of_range_are_one_line(camera_yaml: Path) -> None
     camera_yaml.write_text(text.replace("fx: 520.9", "fx: 1e300"))
     assert open_error(camera_yaml) == f"{camera_yaml}: camera fx must be > 0 px and at most 1e+06 px, got 1e+300"
     camera_yaml.write_text(text.replace("fx: 520.9", f"fx: {'9' * 400}"))
-    assert open_error(camera_yaml).startswith(f"{camera_yaml}:1: fx: expected a number, got 9999")
+    assert open_error(camera_yaml).startswith(f"{camera_yaml}:1: fx: expected a number, got <an integer of about 401 digits>")

@@ -131,5 +131,5 @@ def test_a_stored_frame_that_cannot_be_opened_is_rendered_again(tmp_path: Path, 
     monkeypatch.setattr(np, "fromfile", refused)
     image, messages = cache_warnings(lambda: rendered(tmp_path, "cache", "indoor", "rgbd")[FRAME].image)
     monkeypatch.undo()
-    assert messages == [f"{path}: bad cached frame, replaced by a fresh render: Permission denied"]
+    assert messages == [f"{path}: bad cached frame, replaced by a fresh render: cannot read image (Permission denied)"]
     assert np.array_equal(image, fresh) and path.read_bytes() == (tmp_path / "fresh" / "image_left" / "000001.png").read_bytes()
