@@ -11,7 +11,7 @@ interval, which must be the same for every k (the script exits 1 when it is not)
 
 ``--executor threads``: a run happens in the thread that hands it over (the search runs a
 round's trials in threads), so the scheduling is measured beyond the machine's cores.
-``--executor ray``: runs are Ray tasks (``pytest_sal.engine.ray_executor.RayExecutor``) on a
+``--executor ray``: runs are Ray tasks (``pytest_sal.engine.execution.ray_executor.RayExecutor``) on a
 local Ray with ``--num-cpus`` logical CPUs (default: the largest k) or the cluster at
 ``--address``. No cache: every trial runs. From the repository root:
 
@@ -31,12 +31,12 @@ from pathlib import Path
 from typing import Any
 
 from pytest_sal import tracking_rate
-from pytest_sal.engine.executor import Executor
-from pytest_sal.engine.outcome import Boundary
-from pytest_sal.engine.requirement_runner import SearchSettings, run_search
+from pytest_sal.engine.execution.executor import Executor
+from pytest_sal.engine.execution.run_job import RunJob, RunOutput
+from pytest_sal.engine.execution.trial_runner import TrialRunner
+from pytest_sal.engine.outcomes.outcome import Boundary
 from pytest_sal.engine.requirements import Requirement
-from pytest_sal.engine.run_job import RunJob, RunOutput
-from pytest_sal.engine.trial_runner import TrialRunner
+from pytest_sal.engine.search.requirement_search import SearchSettings, run_search
 from pytest_sal.testing import InProcessSlots, SleepySlam
 from sal_adapters import open_dataset
 from sal_modules import fog
@@ -93,9 +93,9 @@ def measure(k: int, base: Executor | None, args: argparse.Namespace, workdir: Pa
 def ray_executor(args: argparse.Namespace) -> Executor:
     """A ``RayExecutor`` on the cluster at ``--address`` or a local Ray with ``--num-cpus``."""
     try:
-        from pytest_sal.engine.ray_executor import RayExecutor  # type: ignore[import-not-found,unused-ignore]
+        from pytest_sal.engine.execution.ray_executor import RayExecutor  # type: ignore[import-not-found,unused-ignore]
     except ImportError as exc:
-        raise SystemExit(f"--executor ray needs pytest_sal.engine.ray_executor.RayExecutor and ray: {exc}") from None
+        raise SystemExit(f"--executor ray needs pytest_sal.engine.execution.ray_executor.RayExecutor and ray: {exc}") from None
     executor: Executor = RayExecutor(address=args.address, num_cpus=args.num_cpus or max(args.k))
     return executor
 

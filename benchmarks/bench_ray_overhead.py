@@ -20,9 +20,9 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from pytest_sal.engine.executor import Executor, LocalExecutor
-from pytest_sal.engine.ray_executor import RayExecutor
-from pytest_sal.engine.run_job import RunJob
+from pytest_sal.engine.execution.executor import Executor, LocalExecutor
+from pytest_sal.engine.execution.ray_executor import RayExecutor
+from pytest_sal.engine.execution.run_job import RunJob
 from pytest_sal.testing import FakeSlam
 from sal_adapters import open_dataset
 from sal_modules import fog

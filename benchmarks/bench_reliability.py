@@ -31,10 +31,10 @@ from multiprocessing import Pool
 import numpy as np
 from scipy import special
 
-from pytest_sal.engine.boundary_search import SearchSpace
-from pytest_sal.engine.reliability_compare import regression_probability
-from pytest_sal.engine.reliability_curve import SeverityAxis, fit_curve
-from pytest_sal.engine.reliability_search import reliability_search
+from pytest_sal.engine.search.bisection import SearchSpace
+from pytest_sal.engine.search.reliability_compare import regression_probability
+from pytest_sal.engine.search.reliability_curve import SeverityAxis, fit_curve
+from pytest_sal.engine.search.reliability_search import reliability_search
 
 R, C, MAX_RUNS, EDGE = 0.8, 0.9, 30, 100.0
 AXIS = SeverityAxis.for_range(0, 1000, False, 0.05, integer=True)

@@ -8,14 +8,14 @@
 ...     assert sal_outcome.boundary.fail_value < 25
 
 pytest imports this package in every session (entry point ``pytest11: sal``), so each name
-loads its module on first use (``sal_adapters.lazy``).
+loads its module on first use (``sal_adapters.common.lazy``).
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from sal_adapters.lazy import lazy_exports
+from sal_adapters.common.lazy import lazy_exports
 
 if TYPE_CHECKING:  # what type checkers see; at run time each name loads on first use
     from pytest_sal.api import at, dataset_fixture, require, sweep
@@ -30,7 +30,7 @@ if TYPE_CHECKING:  # what type checkers see; at run time each name loads on firs
         t_rel,
         tracking_rate,
     )
-    from sal_adapters.errors import SalError
+    from sal_adapters.common.errors import SalError
 
 __all__ = [
     "InvalidRequirement",
@@ -67,6 +67,6 @@ __getattr__, __dir__ = lazy_exports(
             "t_rel",
             "tracking_rate",
         ],
-        "sal_adapters.errors": ["SalError"],
+        "sal_adapters.common.errors": ["SalError"],
     },
 )

@@ -22,7 +22,7 @@ from typing import Any, TypeVar
 import pytest
 
 from pytest_sal.engine.requirements import InvalidRequirement, Requirement
-from sal_adapters.errors import SalError
+from sal_adapters.common.errors import SalError
 from sal_modules.param_refs import ParamRef
 
 __all__ = ["at", "dataset_fixture", "require", "sweep"]

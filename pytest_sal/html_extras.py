@@ -16,8 +16,8 @@ from typing import Any
 
 import pytest
 
-from pytest_sal.engine.outcome import Outcome
-from pytest_sal.engine.quantity import with_unit
+from pytest_sal.engine.outcomes.outcome import Outcome
+from pytest_sal.engine.outcomes.quantity import with_unit
 from pytest_sal.report.html_page import esc
 from pytest_sal.report.outcome_report import trial_verdict
 

@@ -18,7 +18,7 @@ import pytest
 from pytest_sal.history.gate import MISSING_POLICIES, space_form_problem
 
 if TYPE_CHECKING:
-    from pytest_sal.engine.requirement_runner import SearchSettings
+    from pytest_sal.engine.search.requirement_search import SearchSettings
     from pytest_sal.history.regression import RegressionCheck
 
 __all__ = ["INI_KEYS", "OPTIONS", "SalOptions", "add_options", "read_options"]
@@ -291,7 +291,7 @@ class SalOptions:
 def read_options(config: pytest.Config) -> SalOptions:
     """The session's ``SalOptions``; a ``pytest.UsageError`` before anything runs for a bad
     value, an output that cannot be written or an unknown system."""
-    from pytest_sal.engine.requirement_runner import SearchSettings
+    from pytest_sal.engine.search.requirement_search import SearchSettings
 
     if not hasattr(config, "workerinput"):  # the controller saw the command line; workers got it checked
         _check_space_forms(config)

@@ -16,10 +16,10 @@ from typing import Any
 import pytest
 
 from pytest_sal.controller_lifeline import follow_controller
-from pytest_sal.engine.outcome import Outcome
-from pytest_sal.engine.quantity import num, with_unit
-from pytest_sal.engine.requirement_runner import failure_message
+from pytest_sal.engine.outcomes.outcome import Outcome
+from pytest_sal.engine.outcomes.quantity import num, with_unit
 from pytest_sal.engine.requirements import InvalidRequirement
+from pytest_sal.engine.search.requirement_search import failure_message
 from pytest_sal.html_extras import HtmlExtras
 from pytest_sal.options import add_options
 from pytest_sal.report.formatting import trial_line
@@ -257,7 +257,7 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> None:
 @pytest.hookimpl(wrapper=True)
 def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) -> Any:
     report = yield
-    errors = sys.modules.get("sal_adapters.errors")  # not loaded: the error cannot be a SalError
+    errors = sys.modules.get("sal_adapters.common.errors")  # not loaded: the error cannot be a SalError
     if call.excinfo is not None and errors is not None and call.excinfo.errisinstance(errors.SalError):
         report.longrepr = call.excinfo.getrepr(style="value")  # its message is the whole story (a dataset file:line)
     outcome = item.stash.get(OUTCOME, None)

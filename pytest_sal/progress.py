@@ -22,7 +22,7 @@ import sys
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from pytest_sal.engine.outcome import Trial
+from pytest_sal.engine.outcomes.outcome import Trial
 from pytest_sal.report.formatting import short_id, trial_line
 
 __all__ = ["trial_printer"]

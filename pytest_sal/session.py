@@ -14,7 +14,7 @@ from pytest_sal.options import read_options
 from pytest_sal.session_results import SessionResults
 
 if TYPE_CHECKING:
-    from pytest_sal.engine.executor import Executor
+    from pytest_sal.engine.execution.executor import Executor
     from pytest_sal.history.run_history import History
     from pytest_sal.store.trial_cache import ContentCache
 
@@ -64,7 +64,7 @@ class SalSession:
         on its first run, not here. A method, not a property: pytest 8.0 reads every attribute
         of a registered plugin, which would make it (and import numpy) in every session."""
         if self._executor is None:
-            from pytest_sal.engine.executor_factory import make_executor
+            from pytest_sal.engine.execution.executor_factory import make_executor
 
             # every xdist worker counts on its share of the cluster when it decides how many runs to send at once
             share = {"share": int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))} if self.options.executor == "ray" else {}
@@ -122,7 +122,7 @@ class SalSession:
     # -- running -------------------------------------------------------------------------------
     def _runner(self, item: pytest.Item, ref: Any, dataset: Any, system: Any, runs: int | None, workdir: Path) -> Any:
         """The trial runner of ``item``; under ``-v`` it prints each trial as it ends."""
-        from pytest_sal.engine.trial_runner import TrialRunner
+        from pytest_sal.engine.execution.trial_runner import TrialRunner
         from pytest_sal.progress import trial_printer
         from pytest_sal.report.outcome_report import trial_metric_names
 
@@ -149,7 +149,7 @@ class SalSession:
 
     def search(self, item: pytest.Item, dataset: Any, system: Any, runs: int | None, workdir: Path) -> Any:
         """Boundary search of ``item``'s requirement; compared with the history when asked."""
-        from pytest_sal.engine.requirement_runner import search_outcome
+        from pytest_sal.engine.search.requirement_search import search_outcome
         from pytest_sal.history.regression import warm_start
 
         requirement = item.function.sal_requirement  # type: ignore[attr-defined]
@@ -162,7 +162,7 @@ class SalSession:
         return self._finished(outcome, system, family)
 
     def single(self, item: pytest.Item, ref: Any, value: float, dataset: Any, system: Any, runs: int | None, workdir: Path) -> Any:
-        from pytest_sal.engine.requirement_runner import single_outcome
+        from pytest_sal.engine.search.requirement_search import single_outcome
 
         runner = self._runner(item, ref, dataset, system, runs, workdir)
         family = self._family(runner)
@@ -184,7 +184,7 @@ class SalSession:
     def _start_from(self, key: tuple[str, str, str]) -> Any:
         """The outcome whose boundary the search tries first: the baseline's under
         ``--sal-compare``, else the last run's (``None`` when the history has neither)."""
-        from sal_adapters.errors import SalError
+        from sal_adapters.common.errors import SalError
 
         if not self.options.history_dir.is_dir():
             return None

@@ -16,7 +16,7 @@ from pytest_sal.history.gate import NOT_COMPARED
 from pytest_sal.options import SalOptions
 
 if TYPE_CHECKING:
-    from pytest_sal.engine.outcome import Outcome
+    from pytest_sal.engine.outcomes.outcome import Outcome
 
 __all__ = ["SessionResults", "outcome_of"]
 
@@ -25,7 +25,7 @@ def outcome_of(report: pytest.TestReport) -> Outcome | None:
     """The ``Outcome`` a report carries (its ``sal_outcome`` user property), or ``None``."""
     for name, value in report.user_properties:
         if name == "sal_outcome":
-            from pytest_sal.engine.outcome import Outcome
+            from pytest_sal.engine.outcomes.outcome import Outcome
 
             return Outcome.from_dict(json.loads(str(value)))
     return None
@@ -95,8 +95,8 @@ class SessionResults:
             outcome.commit = commit + ("+dirty" if dirty else "")
         from pytest_sal.report.outcome_page import write_html_report
         from pytest_sal.report.outcome_report import write_markdown
-        from sal_adapters.atomic import writing
-        from sal_adapters.errors import WriteError
+        from sal_adapters.common.atomic import writing
+        from sal_adapters.common.errors import WriteError
 
         name = self._save_name()
         history = History(self.options.history_dir)

@@ -23,8 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from pytest_sal.engine.executor import Executor
-from pytest_sal.engine.run_job import RunJob, RunOutput, run_job
+from pytest_sal.engine.execution.executor import Executor
+from pytest_sal.engine.execution.run_job import RunJob, RunOutput, run_job
 from sal_adapters import Sequence
 from sal_wrappers.base import RunResult, SlamSystem, StopCheck, TrackState
 

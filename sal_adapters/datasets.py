@@ -14,10 +14,10 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from sal_adapters.atomic import replacing_dir, writing
-from sal_adapters.errors import DatasetError
-from sal_adapters.plugins import EntryPointRegistry
-from sal_adapters.textfiles import atomic_write_text
+from sal_adapters.common.atomic import replacing_dir, writing
+from sal_adapters.common.errors import DatasetError
+from sal_adapters.common.plugins import EntryPointRegistry
+from sal_adapters.common.textfiles import atomic_write_text
 
 if TYPE_CHECKING:  # the registry (DATASETS.names() in the sal command's help) needs no numpy
     from sal_adapters.sequence import Frame, Sequence
@@ -127,7 +127,7 @@ def write_sequence(sequence: Sequence, out_dir: str | Path, layout: str | None =
     """Write ``sequence`` in its own dataset layout (or ``layout``) under ``out_dir``.
 
     The folder is filled through a hidden sibling and swapped into place when complete
-    (``sal_adapters.atomic``), so a run killed midway leaves the previous copy, never a half
+    (``sal_adapters.common.atomic``), so a run killed midway leaves the previous copy, never a half
     written one. An existing ``out_dir`` must be empty or an earlier output of this function
     (it is replaced). Never writes into the sequence's source folder. A folder that cannot be
     written raises ``WriteError`` naming it.

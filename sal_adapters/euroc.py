@@ -20,10 +20,11 @@ from typing import Any
 
 import numpy as np
 
-from sal_adapters.atomic import copy_tree
 from sal_adapters.camera import Camera
+from sal_adapters.common.atomic import copy_tree
+from sal_adapters.common.errors import DatasetError, DatasetWarning
+from sal_adapters.common.textfiles import atomic_write_text
 from sal_adapters.datasets import DatasetKind
-from sal_adapters.errors import DatasetError, DatasetWarning
 from sal_adapters.euroc_files import (
     FRAME_CSV_HEADER,
     GT_SENSOR_YAML,
@@ -37,7 +38,6 @@ from sal_adapters.euroc_files import (
 )
 from sal_adapters.images import probe_image, write_image
 from sal_adapters.sequence import Frame, FrameRecord, Sequence
-from sal_adapters.textfiles import atomic_write_text
 from sal_adapters.trajectory import Trajectory, seconds_to_ns
 
 __all__ = ["EUROC", "GROUNDTRUTH_FRAMES", "EurocDataset"]

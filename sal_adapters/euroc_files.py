@@ -15,10 +15,10 @@ from typing import Any
 
 import numpy as np
 
-from sal_adapters.bounded_yaml import quote, read_dataset_yaml
 from sal_adapters.camera import Camera, frame_size_problem
-from sal_adapters.errors import DatasetError
-from sal_adapters.textfiles import check_times, read_rows
+from sal_adapters.common.bounded_yaml import quote, read_dataset_yaml
+from sal_adapters.common.errors import DatasetError
+from sal_adapters.common.textfiles import check_times, read_rows
 
 __all__ = [
     "CAMERA_KEYS",

@@ -29,10 +29,11 @@ from pathlib import Path
 
 import numpy as np
 
-from sal_adapters.bounded_yaml import one_line
 from sal_adapters.camera import Camera
+from sal_adapters.common.bounded_yaml import one_line
+from sal_adapters.common.errors import DatasetError, DatasetWarning
+from sal_adapters.common.textfiles import atomic_write_text, format_float, read_rows
 from sal_adapters.datasets import DatasetKind
-from sal_adapters.errors import DatasetError, DatasetWarning
 from sal_adapters.images import IMAGE_SUFFIXES, probe_image, write_image
 from sal_adapters.layout_io import (
     CAMERA_FILE,
@@ -45,7 +46,6 @@ from sal_adapters.layout_io import (
     write_camera_yaml,
 )
 from sal_adapters.sequence import Frame, FrameRecord, Sequence
-from sal_adapters.textfiles import atomic_write_text, format_float, read_rows
 from sal_adapters.trajectory import Trajectory
 
 __all__ = ["DEFAULT_FPS", "FOLDER", "TIMESTAMP_FILES", "FolderDataset"]

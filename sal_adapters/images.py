@@ -11,9 +11,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from sal_adapters.atomic import staged_file
 from sal_adapters.camera import MAX_FRAME_PIXELS, frame_size_problem
-from sal_adapters.errors import DatasetError
+from sal_adapters.common.atomic import staged_file
+from sal_adapters.common.errors import DatasetError
 
 __all__ = [
     "IMAGE_SUFFIXES",

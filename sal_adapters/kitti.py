@@ -18,12 +18,12 @@ from typing import Any
 import numpy as np
 
 from sal_adapters.camera import MAX_FOCAL_PX, Camera
+from sal_adapters.common.errors import DatasetError, DatasetWarning
+from sal_adapters.common.textfiles import atomic_write_text, iter_rows, read_rows
 from sal_adapters.datasets import DatasetKind
-from sal_adapters.errors import DatasetError, DatasetWarning
 from sal_adapters.images import IMAGE_SUFFIXES, read_image, write_image
 from sal_adapters.layout_io import fps_from_timestamps
 from sal_adapters.sequence import Frame, FrameRecord, Sequence
-from sal_adapters.textfiles import atomic_write_text, iter_rows, read_rows
 from sal_adapters.trajectory import Trajectory, read_times, write_times
 
 __all__ = ["KITTI", "KittiDataset", "read_calib"]

@@ -27,11 +27,11 @@ from typing import Any
 
 import numpy as np
 
-from sal_adapters.bounded_yaml import quote, read_dataset_yaml
 from sal_adapters.camera import Camera
-from sal_adapters.errors import DatasetError
+from sal_adapters.common.bounded_yaml import quote, read_dataset_yaml
+from sal_adapters.common.errors import DatasetError
+from sal_adapters.common.textfiles import atomic_write_text, check_times, format_float, read_rows
 from sal_adapters.sequence import Frame
-from sal_adapters.textfiles import atomic_write_text, check_times, format_float, read_rows
 
 __all__ = [
     "CAMERA_FILE",

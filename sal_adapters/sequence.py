@@ -13,7 +13,7 @@ from typing import Any, Literal
 import numpy as np
 
 from sal_adapters.camera import Camera
-from sal_adapters.errors import DatasetError
+from sal_adapters.common.errors import DatasetError
 from sal_adapters.images import Size, read_depth, read_image
 from sal_adapters.trajectory import Trajectory
 

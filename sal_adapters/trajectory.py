@@ -16,8 +16,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from sal_adapters.errors import DatasetError
-from sal_adapters.textfiles import (
+from sal_adapters.common.errors import DatasetError
+from sal_adapters.common.textfiles import (
     atomic_write_text,
     check_times,
     format_float,

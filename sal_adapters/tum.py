@@ -23,8 +23,9 @@ from pathlib import Path, PurePosixPath
 import numpy as np
 
 from sal_adapters.camera import Camera
+from sal_adapters.common.errors import DatasetError, DatasetWarning
+from sal_adapters.common.textfiles import atomic_write_text, format_float
 from sal_adapters.datasets import DatasetKind
-from sal_adapters.errors import DatasetError, DatasetWarning
 from sal_adapters.images import probe_image, write_depth, write_image
 from sal_adapters.layout_io import (
     CAMERA_FILE,
@@ -36,7 +37,6 @@ from sal_adapters.layout_io import (
     write_camera_yaml,
 )
 from sal_adapters.sequence import Frame, FrameRecord, Sequence
-from sal_adapters.textfiles import atomic_write_text, format_float
 from sal_adapters.trajectory import Trajectory
 
 __all__ = ["DEPTH_SCALE", "FREIBURG_CAMERAS", "ROS_DEFAULT_INTRINSICS", "TUM", "TumDataset", "associate", "freiburg_camera"]

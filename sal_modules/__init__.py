@@ -8,14 +8,14 @@
 
 Module classes are found through the ``sal.perturbations`` entry-point group, so
 ``from sal_modules import fog`` works for built-ins and installed plug-ins alike. Each name
-loads its module on first use (``sal_adapters.lazy``): importing the package pulls no numpy.
+loads its module on first use (``sal_adapters.common.lazy``): importing the package pulls no numpy.
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from sal_adapters.lazy import lazy_exports
+from sal_adapters.common.lazy import lazy_exports
 
 if TYPE_CHECKING:  # what type checkers see; at run time each name loads on first use
     from sal_modules.base import Composite, Perturbation, SequencePerturbation
@@ -48,7 +48,7 @@ __all__ = [
 
 def _registered(name: str) -> Any:
     """``sal_modules.fog`` and friends: the registered module class of that name."""
-    from sal_adapters.suggest import suggestion
+    from sal_adapters.common.suggest import suggestion
     from sal_modules.registry import PERTURBATIONS, module_class
 
     if name not in PERTURBATIONS.names():

@@ -27,8 +27,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from sal_adapters.json_values import json_safe
-from sal_adapters.suggest import suggestion
+from sal_adapters.common.json_values import json_safe
+from sal_adapters.common.suggest import suggestion
 from sal_modules.context import ModuleContext
 from sal_modules.errors import ModuleError, ParameterError
 from sal_modules.param_refs import ParamRef

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from sal_adapters.errors import SalError
+from sal_adapters.common.errors import SalError
 
 __all__ = ["DepthUnavailable", "ModuleError", "ParameterError"]
 

@@ -18,8 +18,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
-from sal_adapters.json_values import json_safe
-from sal_adapters.quoting import short_repr
+from sal_adapters.common.json_values import json_safe
+from sal_adapters.common.quoting import short_repr
 from sal_modules.errors import ParameterError
 from sal_modules.param_refs import Bound, ParamRef
 

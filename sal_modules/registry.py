@@ -6,7 +6,7 @@ import json
 from collections.abc import Mapping
 from typing import Any
 
-from sal_adapters.plugins import EntryPointRegistry
+from sal_adapters.common.plugins import EntryPointRegistry
 from sal_modules.base import Composite, Perturbation
 from sal_modules.errors import ParameterError
 

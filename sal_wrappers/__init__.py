@@ -6,15 +6,15 @@
 >>> result.tracking_rate, result.trajectory                # doctest: +SKIP
 
 The registry and ``create`` are light; the other names load their module on first use
-(``sal_adapters.lazy``), so naming a system does not pull numpy.
+(``sal_adapters.common.lazy``), so naming a system does not pull numpy.
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from sal_adapters.lazy import lazy_exports
-from sal_adapters.plugins import EntryPointRegistry
+from sal_adapters.common.lazy import lazy_exports
+from sal_adapters.common.plugins import EntryPointRegistry
 
 if TYPE_CHECKING:  # what type checkers see; at run time each name loads on first use
     from sal_wrappers.base import RunResult, SlamSystem, SlamSystemError, TrackState

@@ -21,7 +21,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from sal_adapters import Sequence, Trajectory
-from sal_adapters.errors import SalError
+from sal_adapters.common.errors import SalError
 
 __all__ = ["NO_FRAMES", "WRITTEN_BEFORE_FAILURE", "RunResult", "SlamSystem", "SlamSystemError", "StopCheck", "TrackState", "file_sha256"]
 
@@ -34,7 +34,7 @@ NO_FRAMES = "the sequence has no frames (every frame dropped?): nothing to run o
 
 #: ``SlamSystem.run``'s ``stop``: called with the ``TrackState`` values (int8) of the first
 #: frames, those whose state is final so far, and the number of frames given; a reason (text)
-#: stops the run there, ``None`` lets it go on (``pytest_sal.engine.early_stop.StopRule``).
+#: stops the run there, ``None`` lets it go on (``pytest_sal.engine.execution.early_stop.StopRule``).
 StopCheck = Callable[[np.ndarray, int], "str | None"]
 
 

@@ -143,7 +143,7 @@ def run_child(
 
 def write_result(path: Path, data: dict[str, Any]) -> None:
     """Write the child's result JSON atomically (for entry points)."""
-    from sal_adapters.textfiles import atomic_write_text
+    from sal_adapters.common.textfiles import atomic_write_text
 
     atomic_write_text(Path(path), json.dumps(data))
 

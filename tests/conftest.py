@@ -11,7 +11,7 @@ from typing import Any
 
 import pytest
 
-import pytest_sal.engine.trial_runner
+import pytest_sal.engine.execution.trial_runner
 import pytest_sal.testing  # noqa: F401
 
 # Loaded here, before any test: pytester's in-process runs (runpytest without a subprocess)
@@ -160,7 +160,7 @@ def isolated_sal_cache(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Pat
 def orb_vocabulary(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The default ORB-SLAM3 vocabulary (k=10, L=6; or ``$SAL_ORB_VOCABULARY``), built at most
     once per test run: xdist workers share the folder beside their basetemps and its lock."""
-    from sal_wrappers.vocabulary import ensure_vocabulary
+    from sal_wrappers.orbslam3.vocabulary import ensure_vocabulary
 
     base = tmp_path_factory.getbasetemp()
     folder = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "orb-vocabulary"

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from pytest_sal.engine.outcome import Boundary, Outcome, Trial
+from pytest_sal.engine.outcomes.outcome import Boundary, Outcome, Trial
 from pytest_sal.history.run_history import History
 
 __all__ = ["DROP", "FOG", "drop", "fog", "save"]

@@ -9,7 +9,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from pytest_sal.engine.outcome import Boundary, Outcome, Trial, TrialMetrics
+from pytest_sal.engine.outcomes.outcome import Boundary, Outcome, Trial, TrialMetrics
 
 __all__ = ["FOG_REQ", "XSS_ID", "flaky", "fog", "m", "never_passed", "png", "rain", "regressed", "sweep_point"]
 

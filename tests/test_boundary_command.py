@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from pytest_sal.cli.main import main
-from pytest_sal.engine.outcome import Outcome
+from pytest_sal.engine.outcomes.outcome import Outcome
 from pytest_sal.experiment.boundary import linear_sweep_trials
 from pytest_sal.experiment.boundary_summary import EXPERIMENT_KEYS, BoundarySummary, read_boundary_summary, upgrade_boundary_summary
 from pytest_sal.testing import FakeSlam

@@ -20,9 +20,9 @@ import pytest
 from faults import fill_disk_under, refuse_writes_under, stamps
 
 from pytest_sal import tracking_rate
+from pytest_sal.engine.execution.run_job import cached_sequence
+from pytest_sal.engine.execution.trial_runner import TrialRunner
 from pytest_sal.engine.requirements import Requirement
-from pytest_sal.engine.run_job import cached_sequence
-from pytest_sal.engine.trial_runner import TrialRunner
 from pytest_sal.store.cache_keys import cache_key
 from pytest_sal.store.trial_cache import CacheWarning, ContentCache
 from pytest_sal.testing import FakeSlam
@@ -36,7 +36,7 @@ QUIET = {"loadavg": [0.1, 0.1, 0.1], "cpus": 16, "usable_cpus": 16}
 @pytest.fixture(autouse=True)
 def quiet_machine(monkeypatch: pytest.MonkeyPatch) -> None:
     """The machine these tests run on is shared: its load average must not decide a verdict."""
-    monkeypatch.setattr("pytest_sal.engine.run_job.machine_load", lambda: QUIET)
+    monkeypatch.setattr("pytest_sal.engine.execution.run_job.machine_load", lambda: QUIET)
 
 
 def runner(tmp_path: Path, system: FakeSlam) -> TrialRunner:
@@ -324,7 +324,7 @@ FAILURES: dict[str, tuple[dict[str, Any] | None, dict[str, Any], str | None]] = 
 @pytest.mark.parametrize("case", list(FAILURES))
 def test_a_failure_the_machine_decided_is_not_cached(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, case: str) -> None:
     how, load, reason = FAILURES[case]
-    monkeypatch.setattr("pytest_sal.engine.run_job.machine_load", lambda: load)
+    monkeypatch.setattr("pytest_sal.engine.execution.run_job.machine_load", lambda: load)
     log = tmp_path / "calls.jsonl"
     first = runner(tmp_path, Failing(how, calls_file=str(log)))
     trial = first.evaluate(40.0)

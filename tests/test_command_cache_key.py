@@ -40,8 +40,8 @@ def drift_script(path: Path, drift: float) -> Path:
 
 def trial_runner(tmp_path: Path, system):
     from pytest_sal import ate_rmse
+    from pytest_sal.engine.execution.trial_runner import TrialRunner
     from pytest_sal.engine.requirements import Requirement
-    from pytest_sal.engine.trial_runner import TrialRunner
     from pytest_sal.store.trial_cache import ContentCache
     from sal_modules import fog
 
@@ -144,7 +144,7 @@ def test_the_executable_is_found_on_path_and_hashed(tmp_path):
 
 
 def test_name_is_shown_in_results_and_outcomes(scripts, tmp_path):
-    from pytest_sal.engine.requirement_runner import single_outcome
+    from pytest_sal.engine.search.requirement_search import single_outcome
 
     system = create(
         "command", argv=[sys.executable, str(drift_script(tmp_path / "s.py", 0.0)), "{sequence}", "{output}"], name="myslam", layout="tum"
@@ -200,7 +200,7 @@ def test_a_depends_file_removed_after_creation_is_a_clear_error(tmp_path):
 
 
 def test_a_too_big_depends_folder_is_a_clear_error(tmp_path, monkeypatch):
-    import sal_wrappers.command_files as command_files
+    import sal_wrappers.command.files as command_files
 
     lib = tmp_path / "lib"
     lib.mkdir()
@@ -212,7 +212,7 @@ def test_a_too_big_depends_folder_is_a_clear_error(tmp_path, monkeypatch):
 
 
 def test_a_command_system_is_noisy_unless_it_says_it_is_deterministic() -> None:
-    from pytest_sal.engine.trial_runner import RunPolicy
+    from pytest_sal.engine.execution.trial_runner import RunPolicy
 
     noisy = create("command", argv=["true"])
     steady = create("command", argv=["true"], deterministic=True)

@@ -240,8 +240,8 @@ def test_a_search_that_drops_every_frame_fails_those_runs_for_every_system(scrip
     """Through the trial runner (``run_job``), whatever the system: the run at drop_rate = 1
     fails with the reason and the trial is a failed trial, not an error."""
     from pytest_sal import tracking_rate
+    from pytest_sal.engine.execution.trial_runner import TrialRunner
     from pytest_sal.engine.requirements import Requirement
-    from pytest_sal.engine.trial_runner import TrialRunner
     from pytest_sal.testing import FakeSlam
     from sal_modules import frame_drop
 

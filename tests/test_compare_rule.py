@@ -12,7 +12,7 @@ import pytest
 from history_outcomes import DROP, drop, fog, save
 
 from pytest_sal.cli.main import main
-from pytest_sal.engine.outcome import Boundary, Outcome
+from pytest_sal.engine.outcomes.outcome import Boundary, Outcome
 from pytest_sal.history.gate import compare_with_baseline
 from pytest_sal.history.regression import BoundaryCheck
 from pytest_sal.history.run_history import History

@@ -21,7 +21,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from sal_adapters import DatasetError, open_dataset
-from sal_adapters.cache_dir import no_cache_writes
+from sal_adapters.common.cache_dir import no_cache_writes
 
 SECONDS = 2.0  # of CPU time per input
 MEMORY = 400 * 2**20  # bytes of address space an input may take (beyond: MemoryError)

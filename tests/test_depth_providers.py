@@ -14,7 +14,7 @@ from onnx_models import depth_model
 
 from sal_adapters import Sequence, open_dataset
 from sal_adapters.camera import Camera
-from sal_adapters.errors import CacheWarning
+from sal_adapters.common.errors import CacheWarning
 from sal_adapters.sequence import FrameRecord
 from sal_adapters.synthetic import make_world
 from sal_modules.depth import (

@@ -16,7 +16,7 @@ DOCS = ("README.md", "ARCHITECTURE.md", "CONTRIBUTING.md")
 PACKAGES = ("pytest_sal", "sal_adapters", "sal_modules", "sal_wrappers")
 #: Names a how-to creates as its example (CONTRIBUTING.md: adding a ``haze`` module).
 EXAMPLES = {"sal_modules.weather.haze"}
-#: Subpackages a document may name a path from (``engine/outcome.py``).
+#: Subpackages a document may name a path from (``engine/outcomes/outcome.py``).
 SUBPACKAGES = {p.name: p for package in PACKAGES for p in (ROOT / package).iterdir() if (p / "__init__.py").is_file()}
 
 
@@ -68,6 +68,6 @@ def test_every_dotted_name_resolves(doc: str) -> None:
 
 
 def test_the_checks_see_a_stale_name() -> None:
-    assert paths("see `engine/outcome.py` and `report/html.py`") == {"engine/outcome.py", "report/html.py"}
+    assert paths("see `engine/outcomes/outcome.py` and `report/html.py`") == {"engine/outcomes/outcome.py", "report/html.py"}
     assert not (ROOT / "pytest_sal/report/html.py").exists()
-    assert resolves("pytest_sal.engine.outcome.Outcome") and not resolves("pytest_sal.report.html")
+    assert resolves("pytest_sal.engine.outcomes.outcome.Outcome") and not resolves("pytest_sal.report.html")

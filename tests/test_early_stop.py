@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 
 from pytest_sal import ate_rmse, tracking_rate
-from pytest_sal.engine.early_stop import StopRule
-from pytest_sal.engine.outcome import Trial
+from pytest_sal.engine.execution.early_stop import StopRule
+from pytest_sal.engine.execution.trial_runner import TrialRunner
+from pytest_sal.engine.outcomes.outcome import Trial
 from pytest_sal.engine.requirements import Requirement
-from pytest_sal.engine.trial_runner import TrialRunner
 from pytest_sal.report.formatting import trial_line
 from pytest_sal.store.trial_cache import ContentCache
 from pytest_sal.testing import FakeSlam
@@ -181,7 +181,7 @@ def test_a_stopped_run_is_recorded_and_kept_apart_from_full_runs_in_the_cache(tm
 
 def test_a_failed_tests_message_says_its_edge_runs_were_stopped(tmp_path: Path) -> None:
     """The metrics of a stopped run cover the frames it ran: the failure message says so."""
-    from pytest_sal.engine.requirement_runner import SearchSettings, failure_message, search_outcome
+    from pytest_sal.engine.search.requirement_search import SearchSettings, failure_message, search_outcome
 
     strict = runner(tmp_path, tracking_rate >= 0.9, StoppableFake(calls_file=str(tmp_path / "calls.jsonl")))
     outcome = search_outcome(strict, strict.requirement, SearchSettings(max_trials=3), "test_x")

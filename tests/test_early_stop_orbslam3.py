@@ -19,7 +19,7 @@ import pytest
 pytest.importorskip("pyorbslam3")
 
 from pytest_sal import tracking_rate
-from pytest_sal.engine.early_stop import StopRule
+from pytest_sal.engine.execution.early_stop import StopRule
 from pytest_sal.engine.requirements import Requirement
 from sal_adapters import Sequence, open_dataset
 from sal_modules import create, perturb

@@ -19,10 +19,10 @@ from typing import Any
 import pytest
 
 from pytest_sal import ate_rmse, tracking_rate
-from pytest_sal.engine.early_stop import StopRule
-from pytest_sal.engine.outcome import Trial
+from pytest_sal.engine.execution.early_stop import StopRule
+from pytest_sal.engine.execution.trial_runner import TrialRunner
+from pytest_sal.engine.outcomes.outcome import Trial
 from pytest_sal.engine.requirements import Criterion, Requirement
-from pytest_sal.engine.trial_runner import TrialRunner
 from pytest_sal.store.trial_cache import ContentCache
 from sal_adapters import Sequence, open_dataset
 from sal_modules import create, night, perturb

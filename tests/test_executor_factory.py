@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from pytest_sal.engine.executor import ExecutorError, LocalExecutor
-from pytest_sal.engine.executor_factory import make_executor
+from pytest_sal.engine.execution.executor import ExecutorError, LocalExecutor
+from pytest_sal.engine.execution.executor_factory import make_executor
 from sal_wrappers import create
 
 
@@ -27,7 +27,7 @@ def test_an_unknown_executor_names_the_valid_ones() -> None:
 
 def test_ray_without_ray_installed_is_one_usage_error(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setitem(sys.modules, "ray", None)  # import ray now fails as if it were not installed
-    monkeypatch.delitem(sys.modules, "pytest_sal.engine.ray_executor", raising=False)
+    monkeypatch.delitem(sys.modules, "pytest_sal.engine.execution.ray_executor", raising=False)
     with pytest.raises(ExecutorError) as error:
         make_executor("ray")
     assert str(error.value) == "--sal-executor ray needs Ray: pip install 'pytest-sal[ray]'"
@@ -53,7 +53,7 @@ def test_a_local_rays_token_file_is_private_to_its_user(tmp_path: Path, monkeypa
     with it and ran a task as the CI user (issue 23, item 11): the plugin writes it 0600 in a
     0700 folder, and makes an existing one 0600."""
     pytest.importorskip("ray", reason="the ray extra is not installed")
-    from pytest_sal.engine.ray_executor import private_home_token
+    from pytest_sal.engine.execution.ray_executor import private_home_token
 
     monkeypatch.setenv("HOME", str(tmp_path))
     monkeypatch.delenv("RAY_AUTH_TOKEN", raising=False)

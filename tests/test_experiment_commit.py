@@ -20,7 +20,7 @@ from output_leftovers import LEFTOVER, leftovers
 
 from pytest_sal.experiment.config import load_config
 from pytest_sal.experiment.perturb import PIPELINE_RESULTS, PerturbPlan, plan_perturbations, write_perturbations
-from sal_adapters import atomic
+from sal_adapters.common import atomic
 
 #: the os functions a kill is injected before (every step that changes a folder's entries)
 STEPS = ("mkdir", "rename", "replace", "link", "symlink", "unlink", "rmdir")

@@ -15,7 +15,7 @@ from typing import Any
 import pytest
 from experiment_e2e import BOUNDARY, SEED, Command, png_size, sal, slam_options, write_config
 
-from pytest_sal.engine.boundary_search import TERMINATIONS
+from pytest_sal.engine.search.bisection import TERMINATIONS
 from pytest_sal.experiment.boundary import TRACKING_FAIL_RATE, linear_sweep_trials
 
 SUMMARY = "robustness_boundary/{system}/" + BOUNDARY["name"] + "/boundary_summary.json"

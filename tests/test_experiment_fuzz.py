@@ -32,7 +32,7 @@ from hypothesis import strategies as st
 
 from pytest_sal.experiment.config import build_modules, build_sequence, load_config
 from sal_adapters import SalError
-from sal_adapters.cache_dir import no_cache_writes
+from sal_adapters.common.cache_dir import no_cache_writes
 from sal_adapters.images import write_image
 
 CONFIG = "c.yaml"  # read from the working folder, so messages start with this short name

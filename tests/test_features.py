@@ -22,7 +22,7 @@ from pytest_sal.analysis.feature_tracking import (
 )
 from pytest_sal.analysis.superpoint import decode_superpoint
 from sal_adapters import open_dataset
-from sal_adapters.errors import SalError
+from sal_adapters.common.errors import SalError
 
 GAIN = 10.0  # detector logit per unit brightness of a pixel
 DUSTBIN = 5.0  # "no keypoint" logit

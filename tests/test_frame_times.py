@@ -15,8 +15,8 @@ import pytest
 
 from pytest_sal.cli.main import main
 from sal_adapters import DatasetError, open_dataset, write_sequence
+from sal_adapters.common.textfiles import check_times
 from sal_adapters.layout_io import read_list
-from sal_adapters.textfiles import check_times
 
 #: EuRoC time of the first frame of the excerpt (ns); the cases' seconds are added to it
 EUROC_T0_NS = 1403715273262142976
@@ -236,4 +236,4 @@ def test_the_plugin_shows_a_bad_times_file_as_one_line(layouts: dict[str, Layout
     result.assert_outcomes(errors=1)
     message = f"{times_file}:3: time nan s is not a finite number"
     result.stdout.fnmatch_lines(["*_ ERROR at setup of test_x _*", message, "*short test summary info*"], consecutive=True)
-    assert "Traceback" not in result.stdout.str() and "textfiles.py" not in result.stdout.str()
+    assert "Traceback" not in result.stdout.str() and "common/textfiles.py" not in result.stdout.str()

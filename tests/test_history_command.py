@@ -12,7 +12,7 @@ from history_outcomes import DROP, FOG, drop, fog, save
 
 from pytest_sal.cli.history import history_figure
 from pytest_sal.cli.main import main
-from pytest_sal.engine.outcome import Boundary, Outcome
+from pytest_sal.engine.outcomes.outcome import Boundary, Outcome
 from pytest_sal.history.regression import BoundaryCheck, regressions
 from pytest_sal.history.run_history import History
 from sal_adapters import SalError

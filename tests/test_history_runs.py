@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from history_outcomes import DROP, FOG, drop, fog, save
 
-from pytest_sal.engine.outcome import Outcome
+from pytest_sal.engine.outcomes.outcome import Outcome
 from pytest_sal.history.provenance import commit_info, machine_info
 from pytest_sal.history.run_history import History, outcome_key
 from sal_adapters import SalError

@@ -55,9 +55,9 @@ def test_cycles_count_every_level_but_type_checking(tmp_path: Path) -> None:
 
 def test_layers_rank_by_the_longest_prefix() -> None:
     layer = import_graph.layer_of
-    assert layer("sal_adapters.sequence") < layer("sal_modules.weather.fog") == layer("sal_wrappers.orbslam3")
-    assert layer("sal_wrappers.orbslam3") < layer("pytest_sal.analysis.metrics") < layer("pytest_sal.engine.trial_runner")
-    assert layer("pytest_sal.engine.outcome") < layer("pytest_sal.history.gate") < layer("pytest_sal.report.html")
+    assert layer("sal_adapters.sequence") < layer("sal_modules.weather.fog") == layer("sal_wrappers.orbslam3.system")
+    assert layer("sal_wrappers.orbslam3.system") < layer("pytest_sal.analysis.metrics") < layer("pytest_sal.engine.execution.trial_runner")
+    assert layer("pytest_sal.engine.outcomes.outcome") < layer("pytest_sal.history.gate") < layer("pytest_sal.report.html")
     assert layer("pytest_sal.report.html") < layer("pytest_sal.cli.main") < layer("pytest_sal.plugin")
 
 

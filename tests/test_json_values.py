@@ -10,7 +10,7 @@ from pathlib import Path, PurePosixPath
 import numpy as np
 import pytest
 
-from sal_adapters.json_values import json_safe
+from sal_adapters.common.json_values import json_safe
 
 
 class Level(enum.IntEnum):

@@ -21,11 +21,11 @@ from pytest_sal.analysis.kitti_metrics import (
     trajectory_distances,
 )
 from pytest_sal.analysis.metrics import AGGREGATED, evaluate
-from pytest_sal.engine.outcome import Boundary, Outcome, Trial
-from pytest_sal.engine.requirement_runner import failure_message
+from pytest_sal.engine.outcomes.outcome import Boundary, Outcome, Trial
 from pytest_sal.engine.requirements import METRICS, Requirement, r_rel, t_rel
+from pytest_sal.engine.search.requirement_search import failure_message
 from pytest_sal.experiment.config import ConfigError, parse_config
-from sal_adapters.errors import SalError
+from sal_adapters.common.errors import SalError
 from sal_adapters.trajectory import Trajectory
 from sal_modules import fog
 from sal_wrappers.base import RunResult, TrackState

@@ -1,6 +1,6 @@
 """pytest imports the plugin in every session of an environment with pytest-sal installed: the
 plugin, the packages and ``sal --help`` load no numpy, OpenCV, scipy, matplotlib, evo or tqdm
-until a robustness test or a command needs them (``sal_adapters.lazy``)."""
+until a robustness test or a command needs them (``sal_adapters.common.lazy``)."""
 
 from __future__ import annotations
 

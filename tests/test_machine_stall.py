@@ -17,9 +17,9 @@ import pytest
 from command_programs import indoor, tiny  # noqa: F401 (fixtures)
 
 from pytest_sal import tracking_rate
+from pytest_sal.engine.execution.run_job import STALLED_CPU_SHARE, machine_failure
+from pytest_sal.engine.execution.trial_runner import TrialRunner
 from pytest_sal.engine.requirements import Requirement
-from pytest_sal.engine.run_job import STALLED_CPU_SHARE, machine_failure
-from pytest_sal.engine.trial_runner import TrialRunner
 from pytest_sal.store.trial_cache import ContentCache
 from sal_adapters import Sequence
 from sal_modules import fog
@@ -49,7 +49,7 @@ def track(header, frames, result_path):
 def quiet_machine(monkeypatch: pytest.MonkeyPatch) -> None:
     """The load average at a run's start says the machine is idle: only the run's own CPU may
     tell that it was stalled."""
-    monkeypatch.setattr("pytest_sal.engine.run_job.machine_load", lambda: QUIET)
+    monkeypatch.setattr("pytest_sal.engine.execution.run_job.machine_load", lambda: QUIET)
 
 
 def stopping_program(tmp_path: Path) -> list[str]:

@@ -17,7 +17,7 @@ from scipy.spatial.transform import Rotation
 
 from pytest_sal.analysis.metrics import AGGREGATED, RunMetrics, aggregate, evaluate
 from pytest_sal.analysis.trajectory_errors import associate, ate, default_max_diff, rpe, scale_error
-from sal_adapters.errors import SalError
+from sal_adapters.common.errors import SalError
 from sal_adapters.trajectory import Trajectory
 from sal_wrappers.base import RunResult, TrackState
 

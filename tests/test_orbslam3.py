@@ -38,8 +38,8 @@ pytest.importorskip("pyorbslam3")
 from sal_adapters import Sequence, Trajectory
 from sal_adapters.datasets import open_dataset
 from sal_wrappers import RunResult, TrackState, create
-from sal_wrappers.orbslam3 import OrbSlam3
-from sal_wrappers.orbslam3_settings import settings_yaml, write_settings
+from sal_wrappers.orbslam3.settings import settings_yaml, write_settings
+from sal_wrappers.orbslam3.system import OrbSlam3
 from sal_wrappers.pacing import repace
 
 

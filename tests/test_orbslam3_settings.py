@@ -14,7 +14,7 @@ import pytest
 from sal_adapters import Camera
 from sal_adapters.datasets import open_dataset
 from sal_wrappers import SlamSystemError, TrackState, create
-from sal_wrappers.orbslam3_settings import (
+from sal_wrappers.orbslam3.settings import (
     VIEWER_KEYS,
     Matrix,
     OrbParameters,
@@ -23,7 +23,7 @@ from sal_wrappers.orbslam3_settings import (
     settings_yaml,
     write_settings,
 )
-from sal_wrappers.orbslam3_states import ORB_STATES, map_states, read_final_trajectory, segment_ids
+from sal_wrappers.orbslam3.states import ORB_STATES, map_states, read_final_trajectory, segment_ids
 
 OK, RL, LOST = ORB_STATES["OK"], ORB_STATES["RECENTLY_LOST"], ORB_STATES["LOST"]
 NI, NIY = ORB_STATES["NOT_INITIALIZED"], ORB_STATES["NO_IMAGES_YET"]

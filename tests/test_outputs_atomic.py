@@ -1,4 +1,4 @@
-"""The helper ``sal_adapters.atomic`` and the writers on it (issue 12): an atomic write on a full
+"""The helper ``sal_adapters.common.atomic`` and the writers on it (issue 12): an atomic write on a full
 disk names the file and keeps the old one, ``write_sequence`` into a symlink loop is one error
 naming the path, a failed folder replacement keeps the old folder and leaves nothing, folders and
 files are swapped together, and ``recover`` puts back an old version and removes dead leftovers."""
@@ -14,10 +14,11 @@ from pathlib import Path
 import pytest
 from output_leftovers import leftovers
 
-from sal_adapters import SalError, atomic, open_dataset, write_sequence
-from sal_adapters.atomic import Replacement, recover, replacing_dir
-from sal_adapters.errors import WriteError
-from sal_adapters.textfiles import atomic_write_text
+from sal_adapters import SalError, open_dataset, write_sequence
+from sal_adapters.common import atomic
+from sal_adapters.common.atomic import Replacement, recover, replacing_dir
+from sal_adapters.common.errors import WriteError
+from sal_adapters.common.textfiles import atomic_write_text
 
 
 def test_atomic_write_on_a_full_disk_names_the_file_and_keeps_the_old_one(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -135,7 +135,7 @@ def _kill_when_staging(root: Path) -> None:
 PAUSE_BEFORE_COMMIT = """
 import sys, time
 from pathlib import Path
-from sal_adapters.atomic import Replacement
+from sal_adapters.common.atomic import Replacement
 from pytest_sal.cli.main import main
 from pytest_sal.testing import FakeSlam
 

@@ -16,11 +16,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pytest_sal import tracking_rate
-from pytest_sal.engine.boundary_search import SearchResult, SearchSpace, _Search, boundary_search
-from pytest_sal.engine.outcome import Outcome
-from pytest_sal.engine.requirement_runner import SearchSettings, run_search, search_outcome, search_width
+from pytest_sal.engine.execution.trial_runner import TrialRunner
+from pytest_sal.engine.outcomes.outcome import Outcome
 from pytest_sal.engine.requirements import Requirement
-from pytest_sal.engine.trial_runner import TrialRunner
+from pytest_sal.engine.search.bisection import SearchResult, SearchSpace, _Search, boundary_search
+from pytest_sal.engine.search.requirement_search import SearchSettings, run_search, search_outcome, search_width
 from pytest_sal.report.formatting import trial_line
 from pytest_sal.testing import FakeSlam, InProcessSlots
 from sal_adapters import open_dataset

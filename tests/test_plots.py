@@ -11,7 +11,7 @@ import pytest
 
 from pytest_sal.analysis.plots import ate_figure, plot_ate_over_time, plot_trajectories, save_png, trajectory_figure
 from pytest_sal.analysis.trajectory_errors import ate
-from sal_adapters.errors import SalError
+from sal_adapters.common.errors import SalError
 from sal_adapters.trajectory import Trajectory
 
 BLUE_BGR = (180, 119, 31)  # matplotlib's first colour, tab:blue

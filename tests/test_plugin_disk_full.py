@@ -20,7 +20,7 @@ import errno
 import os
 from pathlib import Path
 
-import sal_adapters.textfiles as textfiles
+import sal_adapters.common.textfiles as textfiles
 
 FULL = [Path(p) for p in os.environ.get("SAL_TEST_FULL", "").split(os.pathsep) if p]
 _atomic_write = textfiles.atomic_write

@@ -17,7 +17,7 @@ import re
 import pytest
 from plugin_suites import HEADER, SMALL_DATASET, outcomes, output, run
 
-from pytest_sal.engine.outcome import Trial, TrialMetrics
+from pytest_sal.engine.outcomes.outcome import Trial, TrialMetrics
 from pytest_sal.report.formatting import trial_line
 
 CONFTEST = '''

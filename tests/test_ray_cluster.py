@@ -16,13 +16,13 @@ import pytest
 from ray_clusters import listening_addresses, ray_environment, session_processes, wait_until_gone
 
 from pytest_sal import tracking_rate
-from pytest_sal.engine.executor import Executor, LocalExecutor
-from pytest_sal.engine.outcome import Outcome, Trial
-from pytest_sal.engine.ray_executor import RayExecutor
-from pytest_sal.engine.requirement_runner import SearchSettings, search_outcome
+from pytest_sal.engine.execution.executor import Executor, LocalExecutor
+from pytest_sal.engine.execution.ray_executor import RayExecutor
+from pytest_sal.engine.execution.run_job import RunJob, RunOutput
+from pytest_sal.engine.execution.trial_runner import TrialRunner
+from pytest_sal.engine.outcomes.outcome import Outcome, Trial
 from pytest_sal.engine.requirements import Requirement
-from pytest_sal.engine.run_job import RunJob, RunOutput
-from pytest_sal.engine.trial_runner import TrialRunner
+from pytest_sal.engine.search.requirement_search import SearchSettings, search_outcome
 from pytest_sal.store.trial_cache import ContentCache
 from sal_adapters import open_dataset
 from sal_modules import fog
@@ -39,7 +39,7 @@ class TwoNodes:
 @pytest.fixture(scope="module")
 def two_nodes() -> Iterator[TwoNodes]:
     """A head and a second node, 1 CPU each, joined by a RayExecutor at the head's GCS address."""
-    from ray.cluster_utils import Cluster  # after pytest_sal.engine.ray_executor: node addresses on 127.0.0.1
+    from ray.cluster_utils import Cluster  # after pytest_sal.engine.execution.ray_executor: node addresses on 127.0.0.1
 
     folder = Path(tempfile.mkdtemp(prefix="sal-ray-", dir="/tmp"))
     (folder / "ray").mkdir()  # Cluster notes its address in $RAY_TMPDIR/ray, not in the shared /tmp/ray

@@ -3,7 +3,7 @@ boundary as the local executor, lost workers retried or failed with the reason a
 a task that never answers cancelled, a cached suite that starts no Ray, the dataset check on the
 worker, loopback only, and nothing left running afterwards.
 
-Ray is imported only through pytest_sal.engine.ray_executor (inside the tests), which keeps a
+Ray is imported only through pytest_sal.engine.execution.ray_executor (inside the tests), which keeps a
 local Ray on 127.0.0.1; the tests' token is RAY_AUTH_TOKEN, not a file in the home folder.
 """
 
@@ -26,18 +26,18 @@ from ray_clusters import listening_addresses, ray_environment, session_processes
 
 import pytest_sal.testing
 from pytest_sal import tracking_rate
-from pytest_sal.engine import ray_executor
-from pytest_sal.engine.executor import Executor, ExecutorError, LocalExecutor
-from pytest_sal.engine.outcome import Outcome
-from pytest_sal.engine.ray_executor import RayExecutor
-from pytest_sal.engine.requirement_runner import SearchSettings, search_outcome
+from pytest_sal.engine.execution import ray_executor
+from pytest_sal.engine.execution.executor import Executor, ExecutorError, LocalExecutor
+from pytest_sal.engine.execution.ray_executor import RayExecutor
+from pytest_sal.engine.execution.run_job import RunJob
+from pytest_sal.engine.execution.trial_runner import TrialRunner
+from pytest_sal.engine.outcomes.outcome import Outcome
 from pytest_sal.engine.requirements import Requirement
-from pytest_sal.engine.run_job import RunJob
-from pytest_sal.engine.trial_runner import TrialRunner
+from pytest_sal.engine.search.requirement_search import SearchSettings, search_outcome
 from pytest_sal.store.trial_cache import ContentCache
 from pytest_sal.testing import FakeSlam, LostWorkerSlam
 from sal_adapters import Sequence, open_dataset
-from sal_adapters.errors import DatasetError
+from sal_adapters.common.errors import DatasetError
 from sal_modules import fog
 from sal_wrappers import SlamSystem, create
 
@@ -267,8 +267,8 @@ def test_another_process_submits_to_the_same_ray_by_its_address(executor: RayExe
     script = textwrap.dedent(
         """
         import sys
-        from pytest_sal.engine.ray_executor import RayExecutor
-        from pytest_sal.engine.run_job import RunJob
+        from pytest_sal.engine.execution.ray_executor import RayExecutor
+        from pytest_sal.engine.execution.run_job import RunJob
         from pytest_sal.testing import FakeSlam
         from sal_adapters import open_dataset
         from sal_modules import fog

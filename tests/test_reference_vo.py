@@ -34,7 +34,7 @@ import pytest
 
 from pytest_sal.analysis.trajectory_errors import ate
 from sal_adapters import Camera, FrameRecord, Sequence, open_dataset
-from sal_adapters.errors import DatasetWarning
+from sal_adapters.common.errors import DatasetWarning
 from sal_wrappers import RunResult, SlamSystemError, TrackState, create
 from sal_wrappers.reference_vo import odometry as vo_odometry
 from sal_wrappers.reference_vo.system import ReferenceVO

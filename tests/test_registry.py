@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from sal_adapters import DATASETS, DatasetError, open_dataset
-from sal_adapters.plugins import EntryPointRegistry, PluginError
+from sal_adapters.common.plugins import EntryPointRegistry, PluginError
 from sal_modules import PERTURBATIONS
 from sal_wrappers import SYSTEMS
 

@@ -18,10 +18,10 @@ import numpy as np
 import pytest
 from scipy import special, stats
 
-from pytest_sal.engine.outcome import Boundary, Outcome, Trial
-from pytest_sal.engine.reliability_compare import refit, regression_probability
-from pytest_sal.engine.reliability_curve import CurveFit, SeverityAxis, fit_curve
-from pytest_sal.engine.reliability_search import (
+from pytest_sal.engine.outcomes.outcome import Boundary, Outcome, Trial
+from pytest_sal.engine.search.reliability_compare import refit, regression_probability
+from pytest_sal.engine.search.reliability_curve import CurveFit, SeverityAxis, fit_curve
+from pytest_sal.engine.search.reliability_search import (
     _CACHED_SHARE,
     _VERDICT_WEIGHT,
     Observation,

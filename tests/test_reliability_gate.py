@@ -10,10 +10,10 @@ from pathlib import Path
 import pytest
 
 from pytest_sal import tracking_rate
-from pytest_sal.engine.outcome import Outcome
-from pytest_sal.engine.requirement_runner import SearchSettings, search_outcome
+from pytest_sal.engine.execution.trial_runner import TrialRunner
+from pytest_sal.engine.outcomes.outcome import Outcome
 from pytest_sal.engine.requirements import Requirement
-from pytest_sal.engine.trial_runner import TrialRunner
+from pytest_sal.engine.search.requirement_search import SearchSettings, search_outcome
 from pytest_sal.history.regression import parse_compare_fail, regressions
 from pytest_sal.testing import BernoulliSlam
 from sal_adapters import open_dataset

@@ -16,7 +16,7 @@ import pytest
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
-from pytest_sal.engine.outcome import Boundary, Outcome, Trial
+from pytest_sal.engine.outcomes.outcome import Boundary, Outcome, Trial
 from pytest_sal.html_extras import outcome_html
 from pytest_sal.report.metric_plot import metric_figure, metric_plot
 from pytest_sal.report.outcome_page import write_html_report

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from sal_adapters import Sequence, open_dataset
-from sal_adapters.cache_dir import no_cache_writes
-from sal_adapters.errors import CacheWarning
+from sal_adapters.common.cache_dir import no_cache_writes
+from sal_adapters.common.errors import CacheWarning
 
 FRAME = 1
 

@@ -11,7 +11,7 @@ import pytest
 from browser import find_picture, needs_chromium, screenshot
 from report_outcomes import FOG_REQ, XSS_ID, flaky, fog, m, never_passed, rain, regressed, sweep_point
 
-from pytest_sal.engine.outcome import Boundary, Outcome, Trial
+from pytest_sal.engine.outcomes.outcome import Boundary, Outcome, Trial
 from pytest_sal.report.formatting import short_id
 from pytest_sal.report.html_page import esc
 from pytest_sal.report.metric_plot import metric_figure, metric_plot

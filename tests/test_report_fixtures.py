@@ -13,7 +13,7 @@ from typing import Any
 import pytest
 from report_outcomes import flaky, fog, never_passed, rain, regressed, sweep_point
 
-from pytest_sal.engine.outcome import Outcome
+from pytest_sal.engine.outcomes.outcome import Outcome
 from pytest_sal.engine.requirements import METRICS, Requirement
 from pytest_sal.history.regression import parse_compare_fail, regressions
 from sal_adapters import DATASETS
@@ -22,7 +22,7 @@ from sal_modules.registry import module_class
 from sal_wrappers import SYSTEMS
 
 COMPARISONS = {"<": operator.lt, "<=": operator.le, ">": operator.gt, ">=": operator.ge}
-#: the plugin's reproduction line (pytest_sal.engine.requirement_runner)
+#: the plugin's reproduction line (pytest_sal.engine.search.requirement_search)
 REPRODUCTION = re.compile(
     r"@sal\.at\((?P<label>.+), (?P<value>[^,]+)\)  # (?P<unit>[^;]+); seed \d+, up to \d+ run\(s\), "
     r"system (?P<system>\S+), dataset (?P<dataset>\S+)"

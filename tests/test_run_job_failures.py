@@ -11,15 +11,15 @@ import pytest
 from kitti_excerpt import kitti_copy
 
 from pytest_sal import tracking_rate
-from pytest_sal.engine.executor import Executor, LocalExecutor
-from pytest_sal.engine.outcome import TRIAL_METRICS
+from pytest_sal.engine.execution.executor import Executor, LocalExecutor
+from pytest_sal.engine.execution.run_job import RunJob, RunOutput, check_readable, failed_output
+from pytest_sal.engine.execution.trial_runner import TrialRunner, run_record_problem
+from pytest_sal.engine.outcomes.outcome import TRIAL_METRICS
 from pytest_sal.engine.requirements import Requirement
-from pytest_sal.engine.run_job import RunJob, RunOutput, check_readable, failed_output
-from pytest_sal.engine.trial_runner import TrialRunner, run_record_problem
 from pytest_sal.store.trial_cache import ContentCache
 from pytest_sal.testing import FakeSlam
 from sal_adapters import Sequence, open_dataset
-from sal_adapters.errors import DatasetError
+from sal_adapters.common.errors import DatasetError
 from sal_modules import fog
 
 LOST = "Ray worker lost 3 times: WorkerCrashedError: The worker died unexpectedly while executing this task"

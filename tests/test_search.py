@@ -9,9 +9,9 @@ import pytest
 
 import pytest_sal as sal
 from pytest_sal import InvalidRequirement, ate_rmse, tracking_rate
-from pytest_sal.engine.boundary_search import SearchSpace, boundary_search
+from pytest_sal.engine.execution.trial_runner import NOISY_RUNS, RunPolicy
 from pytest_sal.engine.requirements import Requirement
-from pytest_sal.engine.trial_runner import NOISY_RUNS, RunPolicy
+from pytest_sal.engine.search.bisection import SearchSpace, boundary_search
 from pytest_sal.testing import FakeSlam
 from sal_modules import fog, frame_drop, motion_blur, night, rain, sensor_noise
 

@@ -1,4 +1,4 @@
-"""A misspelt name gets the closest known one (``sal_adapters.suggest``), wherever it is typed
+"""A misspelt name gets the closest known one (``sal_adapters.common.suggest``), wherever it is typed
 in Python: a parameter on a module class or instance, a chain's parameter, a ``sal.at``
 address, a module name. The YAML, CLI and ``--sal-compare-fail`` entry points are tested with
 their commands (test_experiment, test_module_commands, test_history)."""
@@ -9,8 +9,8 @@ import pytest
 
 import pytest_sal as sal
 from pytest_sal.engine.requirements import InvalidRequirement
-from sal_adapters.plugins import PluginError
-from sal_adapters.suggest import closest, suggestion
+from sal_adapters.common.plugins import PluginError
+from sal_adapters.common.suggest import closest, suggestion
 from sal_modules import ParameterError, create, fog, module_class, night
 
 FOG_PARAMETERS = ", ".join(fog.parameters())

@@ -84,7 +84,7 @@ def test_orbslam3_default_vocabulary_follows_the_environment_and_the_cache(tmp_p
     monkeypatch.setenv("SAL_CACHE_DIR", str(tmp_path / "cache"))
     system = create("orbslam3")
     built = system.identity()["files"]["vocabulary"]
-    assert built.startswith("built by sal_wrappers.vocabulary")  # the default build is named, not hashed or built here
+    assert built.startswith("built by sal_wrappers.orbslam3.vocabulary")  # the default build is named, not hashed or built here
     official = tmp_path / "cache" / "vocabulary" / "ORBvoc.txt"
     official.parent.mkdir(parents=True)
     official.write_text("official\n")

@@ -9,12 +9,12 @@ from typing import Any
 import pytest
 
 from pytest_sal import tracking_rate
+from pytest_sal.engine.execution.trial_runner import TrialRunner
 from pytest_sal.engine.requirements import Requirement
-from pytest_sal.engine.trial_runner import TrialRunner
 from sal_adapters import open_dataset
 from sal_modules import fog
 from sal_wrappers import SlamSystem, SlamSystemError, create
-from sal_wrappers.orbslam3 import OrbSlam3
+from sal_wrappers.orbslam3.system import OrbSlam3
 
 
 def test_defaults_per_system() -> None:

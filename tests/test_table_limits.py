@@ -11,10 +11,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sal_adapters import DatasetError, Trajectory, textfiles
+from sal_adapters import DatasetError, Trajectory
+from sal_adapters.common import textfiles
 from sal_adapters.trajectory import read_times
-from sal_wrappers.orbslam3_states import read_final_trajectory
-from sal_wrappers.program_output import read_output
+from sal_wrappers.command.output import read_output
+from sal_wrappers.orbslam3.states import read_final_trajectory
 
 #: Every reader of a trajectory or time file: datasets' ground truth, ``sal evaluate``, the
 #: ``command`` system's output formats and ORB-SLAM3's saved trajectory.

@@ -9,7 +9,7 @@ import pickle
 
 import pytest
 
-from pytest_sal.engine.outcome import Boundary, Outcome, Trial, TrialMetrics
+from pytest_sal.engine.outcomes.outcome import Boundary, Outcome, Trial, TrialMetrics
 
 STORED = {"ate_rmse": None, "rpe_trans": 0.02, "tracking_rate": 0.9, "maps": 1, "failures": ["lost at frame 12"]}
 

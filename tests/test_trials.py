@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 
 from pytest_sal import tracking_rate
-from pytest_sal.engine.outcome import Trial
+from pytest_sal.engine.execution.run_job import cached_sequence
+from pytest_sal.engine.execution.trial_runner import TrialRunner, aggregate_metrics
+from pytest_sal.engine.outcomes.outcome import Trial
 from pytest_sal.engine.requirements import Requirement
-from pytest_sal.engine.run_job import cached_sequence
-from pytest_sal.engine.trial_runner import TrialRunner, aggregate_metrics
 from pytest_sal.store.trial_cache import ContentCache
 from pytest_sal.testing import FakeSlam, applied_value
 from sal_adapters import open_dataset
@@ -119,8 +119,8 @@ def test_an_edge_that_leaves_the_dataset_unchanged_is_refused_before_any_run(tmp
     # fog at 100 km in a room (depths under 10 m): 255 x (1 - exp(-3.912 x 10 / 1e5)) = 0.1 grey levels
     import pytest
 
-    from pytest_sal.engine.requirement_runner import SearchSettings, search_outcome
     from pytest_sal.engine.requirements import InvalidRequirement
+    from pytest_sal.engine.search.requirement_search import SearchSettings, search_outcome
 
     calls = tmp_path / "calls.jsonl"
     room = runner(tmp_path, FakeSlam(calls_file=str(calls)))

@@ -11,17 +11,18 @@ import numpy as np
 import pytest
 
 from pytest_sal.cli.main import main
-from sal_adapters import SalError, open_dataset, textfiles
-from sal_wrappers import vocabulary as vocab_module
-from sal_wrappers.vocabulary import (
+from sal_adapters import SalError, open_dataset
+from sal_adapters.common import textfiles
+from sal_wrappers.orbslam3 import vocabulary as vocab_module
+from sal_wrappers.orbslam3.vocabulary import (
     ENV_VARIABLE,
     ensure_vocabulary,
     orb_descriptors,
     orb_image_descriptors,
     sequence_images,
 )
-from sal_wrappers.vocabulary_training import build_vocabulary
-from sal_wrappers.vocabulary_tree import Vocabulary, VocabularyError
+from sal_wrappers.orbslam3.vocabulary_training import build_vocabulary
+from sal_wrappers.orbslam3.vocabulary_tree import Vocabulary, VocabularyError
 
 THIRD_PARTY = {  # file -> (k, L, nodes, words), see orbslam3_real_data.md section 1
     "ORBvoc_format_kimera_small_k9L3.txt": (9, 3, 781, 692),

@@ -11,9 +11,9 @@ import json
 import sys
 import xml.etree.ElementTree as ET
 
-from pytest_sal.engine.outcome import Outcome
-from pytest_sal.engine.reliability_compare import refit, regression_probability
-from pytest_sal.engine.reliability_curve import fit_curve
+from pytest_sal.engine.outcomes.outcome import Outcome
+from pytest_sal.engine.search.reliability_compare import refit, regression_probability
+from pytest_sal.engine.search.reliability_curve import fit_curve
 
 
 def sessions(name: str) -> dict[str, Outcome]:

@@ -27,9 +27,9 @@ from tqdm import tqdm
 
 from pytest_sal.analysis.plots import save_png
 from pytest_sal.analysis.superpoint import SuperPointExtractor
-from sal_adapters.errors import SalError
+from sal_adapters.common.errors import SalError
+from sal_adapters.common.textfiles import atomic_write_text
 from sal_adapters.sequence import Frame, Sequence
-from sal_adapters.textfiles import atomic_write_text
 
 __all__ = [
     "FEATURES",

@@ -38,7 +38,7 @@ import numpy as np
 
 from pytest_sal.analysis.kitti_segments import KITTI_SEGMENTS_M, KITTI_STEP, parse_segments, segment_lengths
 from pytest_sal.analysis.trajectory_errors import Align, AteResult, ate, relative_errors
-from sal_adapters.errors import SalError
+from sal_adapters.common.errors import SalError
 from sal_adapters.trajectory import Trajectory
 
 __all__ = [

@@ -7,7 +7,7 @@ import math
 from collections.abc import Iterable
 from numbers import Real
 
-from sal_adapters.errors import SalError
+from sal_adapters.common.errors import SalError
 
 __all__ = ["KITTI_SEGMENTS_M", "KITTI_STEP", "parse_segments", "segment_lengths"]
 

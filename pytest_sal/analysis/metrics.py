@@ -15,7 +15,7 @@ import numpy as np
 from pytest_sal.analysis.kitti_metrics import kitti_from_ate
 from pytest_sal.analysis.kitti_segments import KITTI_SEGMENTS_M, segment_lengths
 from pytest_sal.analysis.trajectory_errors import MIN_POSES, Align, AteResult, RpeResult, RpeUnit, ate, rpe, scale_error
-from sal_adapters.errors import SalError
+from sal_adapters.common.errors import SalError
 from sal_adapters.trajectory import Trajectory
 from sal_wrappers.base import WRITTEN_BEFORE_FAILURE, RunResult
 

@@ -18,8 +18,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from pytest_sal.analysis.trajectory_errors import AteResult
-from sal_adapters.errors import SalError
-from sal_adapters.textfiles import atomic_write
+from sal_adapters.common.errors import SalError
+from sal_adapters.common.textfiles import atomic_write
 from sal_adapters.trajectory import Trajectory
 
 __all__ = ["PLANES", "ate_figure", "plot_ate_over_time", "plot_trajectories", "png_bytes", "save_png", "trajectory_figure"]
@@ -105,7 +105,7 @@ def plot_ate_over_time(ate_results: dict[str, AteResult], path: str | Path, *, t
 
 
 def save_png(fig: Figure, path: str | Path) -> Path:
-    """Render ``fig`` to ``path`` as a PNG, atomically (``sal_adapters.textfiles.atomic_write``)."""
+    """Render ``fig`` to ``path`` as a PNG, atomically (``sal_adapters.common.textfiles.atomic_write``)."""
     png = png_bytes(fig)
 
     def write(handle: IO[Any]) -> None:

@@ -16,7 +16,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from sal_adapters.errors import SalError
+from sal_adapters.common.errors import SalError
 
 __all__ = ["SuperPointExtractor", "decode_superpoint"]
 

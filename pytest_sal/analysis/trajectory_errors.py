@@ -20,7 +20,7 @@ from typing import Any, Literal, NamedTuple, get_args
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from sal_adapters.errors import SalError
+from sal_adapters.common.errors import SalError
 from sal_adapters.trajectory import Trajectory
 
 __all__ = [

@@ -124,6 +124,6 @@ def add_executor_arguments(cmd: argparse.ArgumentParser) -> None:
 
 def executor_from_args(args: argparse.Namespace) -> Any:
     """The ``Executor`` that ``--executor`` / ``--ray-address`` ask for (use it in a ``with``)."""
-    from pytest_sal.engine.executor_factory import make_executor
+    from pytest_sal.engine.execution.executor_factory import make_executor
 
     return make_executor(args.executor, args.ray_address)

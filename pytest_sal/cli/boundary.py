@@ -23,7 +23,7 @@ from pytest_sal.experiment.config import load_config
 from sal_adapters import SalError
 
 if TYPE_CHECKING:
-    from pytest_sal.engine.outcome import Trial
+    from pytest_sal.engine.outcomes.outcome import Trial
     from sal_wrappers.base import SlamSystem
 
 __all__ = ["add_boundary_commands"]

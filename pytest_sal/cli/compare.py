@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, NamedTuple
 from pytest_sal.history.run_history import DEFAULT_ROOT
 
 if TYPE_CHECKING:
-    from pytest_sal.engine.outcome import Outcome
+    from pytest_sal.engine.outcomes.outcome import Outcome
     from pytest_sal.history.regression import Judgement, RegressionCheck
     from pytest_sal.history.run_history import History, RunRecord
 

@@ -13,7 +13,7 @@ from pytest_sal.cli.arg_types import add_cache_arguments, add_executor_arguments
 from pytest_sal.experiment.config import load_config
 from pytest_sal.experiment.evaluate import ScoredRun, evaluate_experiment
 from pytest_sal.experiment.schema import BASELINE
-from sal_adapters.errors import SalError
+from sal_adapters.common.errors import SalError
 
 __all__ = ["add_evaluate_commands"]
 

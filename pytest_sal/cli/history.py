@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from pytest_sal.cli.arg_types import age_seconds, positive_int
-from pytest_sal.engine.outcome import Outcome
+from pytest_sal.engine.outcomes.outcome import Outcome
 from pytest_sal.history.gate import NOT_COMPARED
 from pytest_sal.history.run_history import DEFAULT_ROOT, History, OutcomeKey, RunRecord
 from sal_adapters import SalError

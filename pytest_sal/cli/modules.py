@@ -9,8 +9,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from pytest_sal.cli.arg_types import parse_key_values
+from sal_adapters.common.errors import SalError
 from sal_adapters.datasets import DATASETS, open_dataset
-from sal_adapters.errors import SalError
 
 if TYPE_CHECKING:  # numpy, OpenCV and the modules load when a command runs, not for `sal --help`
     import numpy as np

@@ -9,8 +9,8 @@ import warnings
 from pathlib import Path
 
 from pytest_sal.cli.arg_types import positive_int
+from sal_adapters.common.errors import SalError
 from sal_adapters.datasets import DATASETS, open_dataset
-from sal_adapters.errors import SalError
 
 __all__ = ["add_vocab_commands", "parse_source"]
 
@@ -72,8 +72,8 @@ def parse_source(text: str) -> tuple[str, Path | None]:
 def _run_build(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from sal_wrappers.vocabulary import orb_image_descriptors, sequence_images, synthetic_training_images
-    from sal_wrappers.vocabulary_training import build_vocabulary, check_tree_shape
+    from sal_wrappers.orbslam3.vocabulary import orb_image_descriptors, sequence_images, synthetic_training_images
+    from sal_wrappers.orbslam3.vocabulary_training import build_vocabulary, check_tree_shape
 
     check_tree_shape(args.k, args.levels)
     if args.levels < 5:

@@ -1,4 +1,6 @@
-"""The search engine: requirements, the boundary search, trials (perturb, run, score, judge) and
-the outcome of a requirement. Below the history, the reports, the experiments and the plugin."""
+"""The search engine, below the history, the reports, the experiments and the plugin:
+``requirements`` (the requirement language), ``search`` (where runs go, when to stop, the
+verdict), ``execution`` (trials and runs: perturb, run, score, cache) and ``outcomes`` (the
+result types, their words and their stored form)."""
 
 __all__: list[str] = []

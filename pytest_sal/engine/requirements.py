@@ -20,7 +20,7 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from sal_adapters.errors import SalError
+from sal_adapters.common.errors import SalError
 from sal_modules.param_refs import Bound, ParamRef
 
 __all__ = [

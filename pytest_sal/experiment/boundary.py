@@ -32,12 +32,12 @@ from typing import TYPE_CHECKING, Any
 from pytest_sal.experiment.boundary_summary import boundary_summary_data
 from pytest_sal.experiment.config import ConfigError, build_sequence
 from pytest_sal.experiment.schema import BoundaryConfig, ExperimentConfig, build_module
-from sal_adapters.atomic import Replacement
-from sal_adapters.textfiles import atomic_write_text
+from sal_adapters.common.atomic import Replacement
+from sal_adapters.common.textfiles import atomic_write_text
 
 if TYPE_CHECKING:  # numpy, OpenCV and the modules load when a search runs, not for `sal --help`
-    from pytest_sal.engine.executor import Executor
-    from pytest_sal.engine.outcome import Outcome, Trial
+    from pytest_sal.engine.execution.executor import Executor
+    from pytest_sal.engine.outcomes.outcome import Outcome, Trial
     from pytest_sal.engine.requirements import Requirement
     from pytest_sal.store.trial_cache import ContentCache
     from sal_adapters.sequence import Sequence
@@ -148,8 +148,8 @@ def prepare_boundary_search(
     (``runs``: the most runs per trial, ``None``: 1 for a deterministic system, else
     ``NOISY_RUNS``; ``timeout``: seconds per run; the trial cache at ``cache_dir``, default
     ``.sal/cache``, unless ``use_cache`` is false)."""
+    from pytest_sal.engine.execution.trial_runner import RunPolicy
     from pytest_sal.engine.requirements import Requirement, ate_rmse, tracking_rate
-    from pytest_sal.engine.trial_runner import RunPolicy
     from pytest_sal.store.trial_cache import command_cache
 
     rb = enabled_boundary(config)
@@ -187,9 +187,9 @@ def run_boundary_search(
     an outcome as a PNG at a path), ``boundary_plot.png``; both replace the previous ones together.
     ``executor``: where the runs happen (``None``: here, one at a time)."""
     from pytest_sal.analysis.kitti_metrics import KITTI_SEGMENTS_M
-    from pytest_sal.engine.executor import LocalExecutor
-    from pytest_sal.engine.requirement_runner import SearchSettings, search_outcome
-    from pytest_sal.engine.trial_runner import TrialRunner
+    from pytest_sal.engine.execution.executor import LocalExecutor
+    from pytest_sal.engine.execution.trial_runner import TrialRunner
+    from pytest_sal.engine.search.requirement_search import SearchSettings, search_outcome
 
     config, rb = search.config, search.block
     runner = TrialRunner(

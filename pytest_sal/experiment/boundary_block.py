@@ -10,8 +10,8 @@ from typing import TYPE_CHECKING, Any
 
 from pytest_sal.experiment.schema import BOUNDARY_KEYS, BoundaryConfig, PerturbationConfig, build_module
 from pytest_sal.experiment.value_checks import ValueChecks, is_number
-from sal_adapters.bounded_yaml import quote
-from sal_adapters.suggest import suggestion
+from sal_adapters.common.bounded_yaml import quote
+from sal_adapters.common.suggest import suggestion
 from sal_modules.errors import ParameterError
 
 if TYPE_CHECKING:

@@ -18,7 +18,7 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
-from pytest_sal.engine.outcome import Outcome
+from pytest_sal.engine.outcomes.outcome import Outcome
 
 __all__ = ["EXPERIMENT_KEYS", "BoundarySummary", "boundary_summary_data", "read_boundary_summary", "upgrade_boundary_summary"]
 

@@ -44,10 +44,10 @@ from pytest_sal.experiment.schema import (
 )
 from pytest_sal.experiment.value_checks import ValueChecks, is_finite, is_number, option_hints
 from pytest_sal.experiment.yaml_loader import PATH_CHARS, ConfigError, key_text, read_config_text, read_yaml
-from sal_adapters.bounded_yaml import QUOTE_CHARS, one_line, quote
+from sal_adapters.common.bounded_yaml import QUOTE_CHARS, one_line, quote
+from sal_adapters.common.errors import SalError
+from sal_adapters.common.suggest import suggestion
 from sal_adapters.datasets import DATASETS, open_dataset
-from sal_adapters.errors import SalError
-from sal_adapters.suggest import suggestion
 from sal_modules.errors import ParameterError
 
 if TYPE_CHECKING:  # numpy and the modules load when a config is read, not for `sal --help`

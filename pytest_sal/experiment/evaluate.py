@@ -13,7 +13,7 @@ Under ``<output_dir>/slam_results/<algo>/``::
     trajectory_plots/comparison/run_<k>/trajectory_comparison_error.png translation error over time
     work/run_<k>/<name>/                                             the system's own files and logs
 
-The tree is built beside the previous one (``sal_adapters.atomic``) and swapped in once every
+The tree is built beside the previous one (``sal_adapters.common.atomic``) and swapped in once every
 run is scored: an interrupted evaluation leaves the previous results whole.
 
 Unlike the reference implementation, the baseline is run once per run number and reused for
@@ -42,14 +42,14 @@ from typing import TYPE_CHECKING, Any
 from pytest_sal.experiment.config import build_sequence, perturbed_sequences
 from pytest_sal.experiment.evaluate_plots import aggregated_plot, run_plots, try_plot
 from pytest_sal.experiment.schema import BASELINE, ExperimentConfig
-from sal_adapters.atomic import Replacement
-from sal_adapters.errors import SalError
-from sal_adapters.json_values import json_safe
-from sal_adapters.textfiles import atomic_write_text
+from sal_adapters.common.atomic import Replacement
+from sal_adapters.common.errors import SalError
+from sal_adapters.common.json_values import json_safe
+from sal_adapters.common.textfiles import atomic_write_text
 
 if TYPE_CHECKING:  # numpy and scipy load when a command runs, not for `sal --help`
     from pytest_sal.analysis.metrics import RunMetrics
-    from pytest_sal.engine.executor import Executor
+    from pytest_sal.engine.execution.executor import Executor
     from sal_adapters.sequence import Sequence
     from sal_adapters.trajectory import Trajectory
     from sal_wrappers.base import SlamSystem
@@ -97,7 +97,7 @@ def evaluate_experiment(
     warning (no ground truth, a plot that failed). ``executor``: where the runs happen
     (``None`` or ``local``: here, one at a time; another one needs the cache). Returns the
     summary (also in ``metrics/summary.json``) with ``root``, the results folder, added."""
-    from pytest_sal.engine.run_job import cached_sequence
+    from pytest_sal.engine.execution.run_job import cached_sequence
     from pytest_sal.store.trial_cache import command_cache
 
     remote = executor if executor is not None and executor.name != "local" else None
@@ -185,7 +185,7 @@ def _run_elsewhere(
     from concurrent.futures import ThreadPoolExecutor
 
     from pytest_sal.analysis.kitti_metrics import KITTI_SEGMENTS_M
-    from pytest_sal.engine.run_job import RunJob
+    from pytest_sal.engine.execution.run_job import RunJob
     from sal_wrappers.base import RunResult
 
     def run(name: str) -> tuple[Any, float]:

@@ -10,7 +10,7 @@ from typing import Any
 
 from pytest_sal.experiment.config import build_sequence, perturbed_sequences
 from pytest_sal.experiment.schema import ExperimentConfig
-from sal_adapters.atomic import Replacement
+from sal_adapters.common.atomic import Replacement
 
 __all__ = ["track_features"]
 

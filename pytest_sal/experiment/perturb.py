@@ -6,7 +6,7 @@ cache, with ``pipeline_results.json`` and a copy of the config beside them.
 ``write_perturbations`` writes the plan. Its outputs (``images/<perturbation>/``,
 ``pipeline_results.json``, ``config.yaml``) switch as one generation: they are written into a
 staged copy of the experiment folder (``.<name>.sal-tmp-PID-HEX`` beside it) that is swapped in
-whole once complete (``sal_adapters.atomic.Replacement(within=...)``), so a killed run leaves
+whole once complete (``sal_adapters.common.atomic.Replacement(within=...)``), so a killed run leaves
 the previous generation or the new one, never a mix.
 """
 
@@ -21,10 +21,10 @@ from typing import TYPE_CHECKING, Any
 
 from pytest_sal.experiment.config import ConfigError, build_modules, build_sequence, perturbed_sequences
 from pytest_sal.experiment.schema import ExperimentConfig
-from sal_adapters.atomic import Replacement, copy_tree, writing
-from sal_adapters.cache_dir import no_cache_writes
+from sal_adapters.common.atomic import Replacement, copy_tree, writing
+from sal_adapters.common.cache_dir import no_cache_writes
+from sal_adapters.common.textfiles import atomic_write_text
 from sal_adapters.datasets import WRITTEN_MARKER, write_sequence
-from sal_adapters.textfiles import atomic_write_text
 
 if TYPE_CHECKING:  # numpy and the modules load when a command runs, not for `sal --help`
     from pytest_sal.store.trial_cache import ContentCache

@@ -17,10 +17,10 @@ from typing import Any, TypeGuard, TypeVar
 
 from pytest_sal.experiment.schema import MAX_FRAMES, MAX_NAME_BYTES, MAX_PATH_BYTES, MAX_SEARCH_RUNS, MAX_SEARCH_TRIALS
 from pytest_sal.experiment.yaml_loader import NAME_CHARS, ConfigError, key_text
-from sal_adapters.bounded_yaml import QUOTE_CHARS, one_line, quote, type_name
+from sal_adapters.common.bounded_yaml import QUOTE_CHARS, one_line, quote, type_name
+from sal_adapters.common.plugins import EntryPointRegistry, PluginError
+from sal_adapters.common.suggest import suggestion
 from sal_adapters.datasets import DatasetKind
-from sal_adapters.plugins import EntryPointRegistry, PluginError
-from sal_adapters.suggest import suggestion
 
 __all__ = ["SAFE_NAME_TEXT", "ValueChecks", "is_finite", "is_number", "option_hints"]
 

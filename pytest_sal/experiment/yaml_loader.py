@@ -1,5 +1,5 @@
 """Reading an experiment config's YAML safely: the file checked (a regular file within the
-size limit) before it is read, then the bounded loader of ``sal_adapters.bounded_yaml``
+size limit) before it is read, then the bounded loader of ``sal_adapters.common.bounded_yaml``
 (duplicate keys, values YAML cannot make, size, nesting, values as written and after alias
 expansion refused while the YAML is composed, before anything is built), and the one-line
 ``ConfigError`` it reports.
@@ -13,7 +13,7 @@ import stat
 from typing import Any
 
 from sal_adapters import SalError
-from sal_adapters.bounded_yaml import YamlError, YamlLimits, load_yaml, quote
+from sal_adapters.common.bounded_yaml import YamlError, YamlLimits, load_yaml, quote
 
 __all__ = [
     "CONFIG_YAML",

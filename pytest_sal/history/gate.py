@@ -17,10 +17,10 @@ import os
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
-from sal_adapters.errors import SalError
+from sal_adapters.common.errors import SalError
 
 if TYPE_CHECKING:
-    from pytest_sal.engine.outcome import Outcome
+    from pytest_sal.engine.outcomes.outcome import Outcome
     from pytest_sal.history.regression import RegressionCheck
     from pytest_sal.history.run_history import History
 

@@ -20,10 +20,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from pytest_sal.engine.outcome import Outcome, Trial
-from pytest_sal.engine.quantity import with_unit
+from pytest_sal.engine.outcomes.outcome import Outcome, Trial
+from pytest_sal.engine.outcomes.quantity import with_unit
 from pytest_sal.engine.requirements import METRICS
-from sal_adapters.suggest import closest
+from sal_adapters.common.suggest import closest
 
 __all__ = [
     "DEFAULT_CHECKS",
@@ -142,7 +142,7 @@ class BoundaryCheck(RegressionCheck):
     def _statistical(self, current: Outcome, previous: Outcome) -> str | None:
         """A noisy system's ``s_R`` moved beyond the limit with the current outcome's confidence
         (``reliability_compare``): both curves fitted again from their runs."""
-        from pytest_sal.engine.reliability_compare import refit, regression_probability
+        from pytest_sal.engine.search.reliability_compare import refit, regression_probability
 
         now_b, before_b = current.boundary, previous.boundary
         if now_b.reliability != before_b.reliability or now_b.search_range != before_b.search_range:

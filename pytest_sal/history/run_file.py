@@ -20,8 +20,8 @@ from itertools import accumulate
 from pathlib import Path
 from typing import Any
 
-from pytest_sal.engine.json_shape import MAX_NESTING, nesting_problem, read_fields
-from pytest_sal.engine.outcome import Outcome
+from pytest_sal.engine.outcomes.json_shape import MAX_NESTING, nesting_problem, read_fields
+from pytest_sal.engine.outcomes.outcome import Outcome
 
 __all__ = ["FORMAT_VERSION", "PARSE_NESTING", "read_document", "read_outcomes"]
 

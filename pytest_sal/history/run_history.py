@@ -32,12 +32,12 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from pytest_sal.engine.outcome import Outcome
+from pytest_sal.engine.outcomes.outcome import Outcome
 from pytest_sal.history.provenance import commit_info, machine_info
 from pytest_sal.history.run_file import FORMAT_VERSION, read_document, read_outcomes
-from sal_adapters.errors import SalError
-from sal_adapters.json_values import json_safe
-from sal_adapters.textfiles import atomic_write_text
+from sal_adapters.common.errors import SalError
+from sal_adapters.common.json_values import json_safe
+from sal_adapters.common.textfiles import atomic_write_text
 
 __all__ = [
     "DEFAULT_ROOT",

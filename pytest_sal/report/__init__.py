@@ -2,6 +2,6 @@
 their HTML report (``outcome_page``) and metric plot (``metric_plot``) on the shared page shell
 (``html_page``), the HTML page of an experiment folder (``experiment_page``, with
 ``experiment_folder``, ``experiment_frames`` and ``experiment_results``), contact sheets, and the
-one formatter of metrics and trial lines (``formatting``, on ``pytest_sal.engine.quantity``)."""
+one formatter of metrics and trial lines (``formatting``, on ``pytest_sal.engine.outcomes.quantity``)."""
 
 __all__: list[str] = []

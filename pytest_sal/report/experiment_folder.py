@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from pytest_sal.report.html_page import asset_src, esc
-from sal_adapters.atomic import copy_file
+from sal_adapters.common.atomic import copy_file
 
 __all__ = ["CLEAN", "ExperimentFolder"]
 

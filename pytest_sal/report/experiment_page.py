@@ -31,7 +31,7 @@ from pytest_sal.report.experiment_frames import frames_section
 from pytest_sal.report.experiment_results import boundary_section, features_section, slam_section
 from pytest_sal.report.html_page import REPORT_CSS, esc, html_page, page_folder
 from sal_adapters import SalError
-from sal_adapters.textfiles import atomic_write_text
+from sal_adapters.common.textfiles import atomic_write_text
 
 __all__ = ["write_experiment_report"]
 

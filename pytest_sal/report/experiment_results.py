@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from pytest_sal.engine.outcome import Trial
+from pytest_sal.engine.outcomes.outcome import Trial
 from pytest_sal.engine.requirements import METRICS
 from pytest_sal.experiment.boundary_summary import read_boundary_summary
 from pytest_sal.report.experiment_folder import CLEAN, ExperimentFolder

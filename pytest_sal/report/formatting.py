@@ -5,8 +5,8 @@ files and trial lines: ``signed`` changes, ``metric_text`` (a metric with its un
 ``trial_line`` (one trial as text).
 
 A number with its unit (``num``, ``with_unit``) and the boundary interval (``Boundary.text``,
-``Boundary.short_text``) are written by ``pytest_sal.engine.quantity`` and
-``pytest_sal.engine.outcome``, one layer down, since the engine's failure message needs them
+``Boundary.short_text``) are written by ``pytest_sal.engine.outcomes.quantity`` and
+``pytest_sal.engine.outcomes.outcome``, one layer down, since the engine's failure message needs them
 too; this module builds on them."""
 
 from __future__ import annotations
@@ -15,8 +15,8 @@ import math
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
-from pytest_sal.engine.outcome import Trial
-from pytest_sal.engine.quantity import num, with_unit
+from pytest_sal.engine.outcomes.outcome import Trial
+from pytest_sal.engine.outcomes.quantity import num, with_unit
 from pytest_sal.engine.requirements import METRICS
 
 __all__ = [

@@ -11,7 +11,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from urllib.parse import quote
 
-from sal_adapters.atomic import Replacement
+from sal_adapters.common.atomic import Replacement
 
 __all__ = ["REPORT_CSS", "asset_src", "esc", "html_page", "page_folder"]
 

@@ -16,7 +16,7 @@ from matplotlib.figure import Figure
 from matplotlib.transforms import blended_transform_factory
 
 from pytest_sal.analysis.plots import DPI, FIGSIZE, save_png
-from pytest_sal.engine.outcome import Outcome, Trial
+from pytest_sal.engine.outcomes.outcome import Outcome, Trial
 from pytest_sal.engine.requirements import METRICS
 from pytest_sal.report.formatting import short_id, truncate_left
 from pytest_sal.report.outcome_report import boundary_cell, envelope_text, status

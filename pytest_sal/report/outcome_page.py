@@ -14,8 +14,8 @@ import re
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
-from pytest_sal.engine.outcome import Boundary, Outcome, failures_first
-from pytest_sal.engine.quantity import with_unit
+from pytest_sal.engine.outcomes.outcome import Boundary, Outcome, failures_first
+from pytest_sal.engine.outcomes.quantity import with_unit
 from pytest_sal.report.formatting import metrics_text, short_id, signed
 from pytest_sal.report.html_page import REPORT_CSS, asset_src, esc, html_page, page_folder
 from pytest_sal.report.outcome_report import (
@@ -28,8 +28,8 @@ from pytest_sal.report.outcome_report import (
     trial_rows,
     trial_verdict,
 )
-from sal_adapters.atomic import copy_file
-from sal_adapters.textfiles import atomic_write_text
+from sal_adapters.common.atomic import copy_file
+from sal_adapters.common.textfiles import atomic_write_text
 
 __all__ = ["write_html_report"]
 

@@ -22,11 +22,11 @@ import re
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
-from pytest_sal.engine.outcome import Boundary, Outcome, Trial, failures_first
-from pytest_sal.engine.quantity import num, with_unit
+from pytest_sal.engine.outcomes.outcome import Boundary, Outcome, Trial, failures_first
+from pytest_sal.engine.outcomes.quantity import num, with_unit
 from pytest_sal.history.gate import NOT_COMPARED
 from pytest_sal.report.formatting import metric_text, metrics_text, short_id, signed, truncate_left, truncate_right
-from sal_adapters.textfiles import atomic_write_text
+from sal_adapters.common.textfiles import atomic_write_text
 
 __all__ = [
     "COLUMNS",

@@ -15,8 +15,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from pytest_sal.analysis.plots import DPI, FIGSIZE
-from pytest_sal.engine.outcome import Boundary, Outcome
-from pytest_sal.engine.quantity import with_unit
+from pytest_sal.engine.outcomes.outcome import Boundary, Outcome
+from pytest_sal.engine.outcomes.quantity import with_unit
 from pytest_sal.report.formatting import short_id, truncate_left
 from pytest_sal.report.outcome_report import boundary_cell, envelope_text, status
 

@@ -26,8 +26,8 @@ from typing import NamedTuple
 
 from pytest_sal.store.cache_keys import CacheError
 from pytest_sal.store.entry_format import FILES, MANIFEST, file_listing, pack_entry
-from sal_adapters.file_lock import FileLock
-from sal_adapters.textfiles import atomic_write_text
+from sal_adapters.common.file_lock import FileLock
+from sal_adapters.common.textfiles import atomic_write_text
 
 __all__ = ["CacheFolder", "StoredEntry", "check_key", "write_refused"]
 

@@ -17,7 +17,7 @@ from collections.abc import Mapping
 from pathlib import PurePath
 from typing import Any
 
-from sal_adapters.errors import SalError
+from sal_adapters.common.errors import SalError
 
 __all__ = ["CacheError", "cache_key", "canonical_json"]
 

@@ -25,7 +25,7 @@ their SHA-256. An entry that is not UTF-8, not JSON, has no checksum, does not m
 another key's (a valid entry copied), fails ``check`` or has a damaged file is never served: it
 is removed under its key's lock and computed again, with one :class:`CacheWarning` naming it and
 what was wrong. Entries written before checksums or keys existed are such entries (trial runs
-changed keys instead, see ``pytest_sal.engine.trial_runner.RUNNER_VERSION``). A ``compute`` whose ``transient`` hook gives a reason is
+changed keys instead, see ``pytest_sal.engine.execution.trial_runner.RUNNER_VERSION``). A ``compute`` whose ``transient`` hook gives a reason is
 returned and not stored (a run the machine decided).
 
 A cache that cannot be written (a read-only mount, a folder this user cannot write, a full disk
@@ -57,9 +57,9 @@ from typing import Any
 from pytest_sal.store.cache_folder import CacheFolder, check_key, write_refused
 from pytest_sal.store.cache_keys import CacheError
 from pytest_sal.store.entry_format import MANIFEST, file_listing, listing_mismatch, pack_entry, unpack_entry
-from sal_adapters.errors import CacheWarning
-from sal_adapters.file_lock import FileLock
-from sal_adapters.textfiles import atomic_write
+from sal_adapters.common.errors import CacheWarning
+from sal_adapters.common.file_lock import FileLock
+from sal_adapters.common.textfiles import atomic_write
 
 __all__ = [
     "DEFAULT_CACHE_DIR",

@@ -19,8 +19,8 @@ from numbers import Integral
 from pathlib import Path
 from typing import Any
 
+from sal_adapters.common.errors import DatasetError
 from sal_adapters.datasets import DatasetKind
-from sal_adapters.errors import DatasetError
 from sal_adapters.sequence import SENSORS, Frame, Sequence
 from sal_adapters.synthetic.cache import (
     RENDERER_VERSION,

@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from sal_adapters.cache_dir import cache_writes_allowed, user_cache_dir
-from sal_adapters.errors import CacheWarning, DatasetError
+from sal_adapters.common.cache_dir import cache_writes_allowed, user_cache_dir
+from sal_adapters.common.errors import CacheWarning, DatasetError
 from sal_adapters.images import read_depth, read_image, read_stored, write_depth, write_image
 from sal_adapters.sequence import FrameRecord, Sequence, as_sensor
 from sal_adapters.synthetic.layout import (

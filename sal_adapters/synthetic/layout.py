@@ -21,10 +21,10 @@ from pathlib import Path
 from typing import Any
 
 from sal_adapters.camera import Camera
-from sal_adapters.errors import DatasetError
+from sal_adapters.common.errors import DatasetError
+from sal_adapters.common.textfiles import atomic_write_text, check_times, format_float, read_rows
 from sal_adapters.images import write_depth, write_image
 from sal_adapters.sequence import SENSORS, Frame, FrameRecord, Sequence, as_sensor
-from sal_adapters.textfiles import atomic_write_text, check_times, format_float, read_rows
 from sal_adapters.trajectory import Trajectory
 
 __all__ = [

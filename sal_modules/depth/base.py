@@ -19,8 +19,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from sal_adapters.cache_dir import cache_writes_allowed, user_cache_dir
-from sal_adapters.errors import CacheWarning
+from sal_adapters.common.cache_dir import cache_writes_allowed, user_cache_dir
+from sal_adapters.common.errors import CacheWarning
 from sal_adapters.images import read_depth, read_stored, write_depth
 from sal_adapters.sequence import Sequence
 from sal_modules.context import DepthLookup

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from sal_adapters.lazy import lazy_exports
+from sal_adapters.common.lazy import lazy_exports
 
 if TYPE_CHECKING:
     from sal_wrappers.reference_vo.system import ReferenceVO

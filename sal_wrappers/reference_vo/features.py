@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
-from sal_adapters.compat import popcount
+from sal_adapters.common.compat import popcount
 from sal_wrappers.reference_vo.lens import Lens
 
 __all__ = ["MAX_DISTANCE", "RATIO", "Features", "best_matches", "brute_match", "detect", "guided_match"]

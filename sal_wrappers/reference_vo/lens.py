@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from sal_adapters.compat import undistort_points_iter
+from sal_adapters.common.compat import undistort_points_iter
 from sal_adapters.sequence import Sequence
 
 __all__ = ["Lens", "make_lens"]
