@@ -23,7 +23,7 @@ import pytest
 
 from pytest_sal.engine.requirements import InvalidRequirement, Requirement
 from sal_adapters.common.errors import SalError
-from sal_modules.param_refs import ParamRef
+from sal_modules.params import ParamRef
 
 __all__ = ["at", "dataset_fixture", "require", "sweep"]
 

@@ -31,8 +31,7 @@ from sal_adapters.common.json_values import json_safe
 from sal_adapters.common.suggest import suggestion
 from sal_modules.context import ModuleContext
 from sal_modules.errors import ModuleError, ParameterError
-from sal_modules.param_refs import ParamRef
-from sal_modules.params import Param
+from sal_modules.params import Param, ParamRef
 
 __all__ = ["Composite", "Perturbation", "SequencePerturbation"]
 

@@ -8,6 +8,13 @@ A module declares each parameter as a class attribute::
 
 On the class, ``Fog.visibility_m`` is the ``Param`` itself (what the requirement language and
 boundary search use); on an instance it is the configured value.
+
+``fog.visibility_m >= 25`` and ``(night() >> fog).visibility_m >= 40`` build a ``Bound``: a
+``ParamRef`` to the parameter, the comparison and the number. The requirement language of
+``pytest_sal`` reads bounds as operating envelopes; nothing here runs a search. ``Param`` and
+``ParamRef`` name each other, so they live together; a ``ParamRef`` makes a configured
+``sal_modules.base.Perturbation`` without naming that class, so this module sits below
+``sal_modules.base`` and imports nothing from it.
 """
 
 from __future__ import annotations
@@ -21,9 +28,8 @@ from typing import Any, Literal
 from sal_adapters.common.json_values import json_safe
 from sal_adapters.common.quoting import short_repr
 from sal_modules.errors import ParameterError
-from sal_modules.param_refs import Bound, ParamRef
 
-__all__ = ["Domain", "Param", "SearchScale", "Worse"]
+__all__ = ["COMPARISONS", "Bound", "Domain", "Param", "ParamRef", "SearchScale", "Worse"]
 
 Domain = Literal["continuous", "integer", "choice", "vector", "flag", "text"]
 Worse = Literal["higher", "lower"]
@@ -273,3 +279,97 @@ def _as_float(value: Any) -> float | None:
         return float(value)
     except OverflowError:
         return None
+
+
+#: Comparison operators a bound may use, with their meaning in words.
+COMPARISONS = {">=": "at least", ">": "above", "<=": "at most", "<": "below"}
+
+
+@dataclass(frozen=True, eq=False)
+class ParamRef:
+    """One parameter of a module class (``fog.visibility_m``) or of a configured module or chain
+    (``(night() >> fog).visibility_m``).
+
+    Attributes:
+        target: the module class, or the module instance / ``Composite`` whose other settings apply.
+        address: the parameter's name in ``target`` (``visibility_m``; ``fog.visibility_m`` in a chain).
+        param: the declared ``Param``.
+    """
+
+    target: Any
+    address: str
+    param: Param
+
+    @property
+    def label(self) -> str:
+        """``fog.visibility_m``, or ``(night>>fog).visibility_m`` for a parameter of a chain."""
+        if isinstance(self.target, type):
+            return self.param.qualname
+        if hasattr(self.target, "label"):
+            return f"({self.target.label()}).{self.address}"
+        return f"{self.target.name}.{self.address}"
+
+    @property
+    def unit(self) -> str:
+        """The parameter's unit: the unit of every bound, search value, id and report cell."""
+        return self.param.unit
+
+    def module(self, value: Any) -> Any:
+        """The configured module (or chain) with this parameter set to ``value`` (its unit): a
+        ``sal_modules.base.Perturbation``, typed ``Any`` as ``target`` is, since that class sits
+        above this module (it makes ``ParamRef``s)."""
+        base = self.target() if isinstance(self.target, type) else self.target
+        return base.with_params(**{self.address: value})
+
+    def unchanged_at(self, value: Any) -> str | None:
+        """Why the module owning this parameter leaves the frames unchanged at ``value``
+        (``Perturbation.unchanged_reason``), or ``None``."""
+        module = self.module(value)
+        steps = getattr(module, "steps", None)
+        if steps is not None:  # a chain: the step that owns the parameter
+            module = steps[module.param(self.address)[0]]
+        return module.unchanged_reason()
+
+    def _bound(self, op: str, value: Any) -> Bound:
+        if not isinstance(value, numbers.Real) or isinstance(value, bool):
+            raise TypeError(
+                f"{self.label} {op} {value!r}: compare a parameter with a number in {self.unit or 'its unit'}, "
+                f"e.g. {self.label} {op} {self.param.default!r}"
+            )
+        return Bound(self, op, float(value))
+
+    def __ge__(self, value: Any) -> Bound:
+        return self._bound(">=", value)
+
+    def __gt__(self, value: Any) -> Bound:
+        return self._bound(">", value)
+
+    def __le__(self, value: Any) -> Bound:
+        return self._bound("<=", value)
+
+    def __lt__(self, value: Any) -> Bound:
+        return self._bound("<", value)
+
+    def __repr__(self) -> str:
+        return f"<ParamRef {self.label} [{self.param.unit or '-'}]>"
+
+
+@dataclass(frozen=True, eq=False)
+class Bound:
+    """``ref op value``: the parameter range a requirement must hold over (an envelope)."""
+
+    ref: ParamRef
+    op: str
+    value: float
+
+    def __bool__(self) -> bool:
+        raise TypeError(f"{self} is a bound for sal.require(...), not a truth value")
+
+    @property
+    def condition(self) -> str:
+        """The bound without the parameter: ``>= 25 m``."""
+        unit = f" {self.ref.unit}" if self.ref.unit else ""
+        return f"{self.op} {self.value:g}{unit}"
+
+    def __str__(self) -> str:
+        return f"{self.ref.label} {self.condition}"

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from sal_adapters.common.errors import SalError
-from sal_modules.param_refs import Bound, ParamRef
+from sal_modules.params import Bound, ParamRef
 
 __all__ = [
     "METRICS",
@@ -29,6 +29,7 @@ __all__ = [
     "InvalidRequirement",
     "Metric",
     "Requirement",
+    "SearchSettings",
     "ate_rmse",
     "r_rel",
     "rpe_rot",
@@ -271,3 +272,25 @@ def _check_options(options: Mapping[str, Any], envelope: Bound | None) -> None:
                 f"sal.require(): search_range must be (low, high) in {envelope.ref.unit or 'the unit'}, got {search_range!r}"
             )
         _check_search_range(envelope, search_range)
+
+
+@dataclass(frozen=True)
+class SearchSettings:
+    """Defaults a requirement may override (ini ``sal_tolerance``, ``sal_max_trials``,
+    ``sal_reliability``, ``sal_confidence``, ``sal_max_runs``).
+
+    Attributes:
+        tolerance_pct: default tolerance: the search stops when the bracket's width is at most
+            this percent of its larger end (20-22 m at 10 %), which suits linear parameters and
+            ones searched over decades (0.08-0.09 Mbit/s) alike.
+        max_trials: default trial budget (a deterministic system's bisection).
+        reliability, confidence: a noisy system meets its requirement at the edge when
+            ``p(edge) >= reliability`` with this one-sided confidence.
+        max_runs: default run budget of a noisy system's search.
+    """
+
+    tolerance_pct: float = 10.0
+    max_trials: int = 8
+    reliability: float = 0.8
+    confidence: float = 0.9
+    max_runs: int = 30

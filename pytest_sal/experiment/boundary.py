@@ -41,7 +41,7 @@ if TYPE_CHECKING:  # numpy, OpenCV and the modules load when a search runs, not 
     from pytest_sal.engine.requirements import Requirement
     from pytest_sal.store.trial_cache import ContentCache
     from sal_adapters.sequence import Sequence
-    from sal_modules.param_refs import ParamRef
+    from sal_modules.params import ParamRef
     from sal_wrappers.base import SlamSystem
 
 __all__ = [

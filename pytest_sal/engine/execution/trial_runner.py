@@ -53,7 +53,7 @@ from pytest_sal.store.cache_keys import cache_key
 from pytest_sal.store.trial_cache import ContentCache
 from sal_adapters import Sequence
 from sal_modules import perturb
-from sal_modules.param_refs import ParamRef
+from sal_modules.params import ParamRef
 from sal_wrappers import SlamSystem
 
 __all__ = [

@@ -24,8 +24,7 @@ from pytest_sal.engine.search.reliability_search import Observation, Reliability
 
 if TYPE_CHECKING:
     from pytest_sal.engine.execution.trial_runner import TrialRunner
-    from pytest_sal.engine.requirements import Requirement
-    from pytest_sal.engine.search.requirement_search import SearchSettings
+    from pytest_sal.engine.requirements import Requirement, SearchSettings
 
 __all__ = ["Targets", "axis_of", "reliability_message", "reliability_outcome", "run_observations"]
 

@@ -5,40 +5,17 @@ the words a failed test shows."""
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from pytest_sal.engine.outcomes.outcome import Boundary, Outcome, Trial
-from pytest_sal.engine.requirements import InvalidRequirement, Requirement
+from pytest_sal.engine.requirements import InvalidRequirement, Requirement, SearchSettings
 from pytest_sal.engine.search.bisection import SearchResult, SearchSpace, boundary_search
-from sal_modules.param_refs import ParamRef
+from sal_modules.params import ParamRef
 
 if TYPE_CHECKING:  # the plugin reads SearchSettings at configure time, before any trial runs
     from pytest_sal.engine.execution.trial_runner import TrialRunner
 
 __all__ = ["SearchSettings", "failure_message", "run_search", "search_outcome", "search_space", "search_width", "single_outcome"]
-
-
-@dataclass(frozen=True)
-class SearchSettings:
-    """Defaults a requirement may override (ini ``sal_tolerance``, ``sal_max_trials``,
-    ``sal_reliability``, ``sal_confidence``, ``sal_max_runs``).
-
-    Attributes:
-        tolerance_pct: default tolerance: the search stops when the bracket's width is at most
-            this percent of its larger end (20-22 m at 10 %), which suits linear parameters and
-            ones searched over decades (0.08-0.09 Mbit/s) alike.
-        max_trials: default trial budget (a deterministic system's bisection).
-        reliability, confidence: a noisy system meets its requirement at the edge when
-            ``p(edge) >= reliability`` with this one-sided confidence.
-        max_runs: default run budget of a noisy system's search.
-    """
-
-    tolerance_pct: float = 10.0
-    max_trials: int = 8
-    reliability: float = 0.8
-    confidence: float = 0.9
-    max_runs: int = 30
 
 
 def search_space(ref: ParamRef, search_range: tuple[float, float] | None = None) -> SearchSpace:
