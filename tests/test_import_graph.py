@@ -1,6 +1,6 @@
 """tools/import_graph.py, the layer and cycle check .ci/lint runs: it must see imports inside
-functions and relative imports, leave ``TYPE_CHECKING`` imports out of cycles, and rank modules
-by their longest layer prefix."""
+functions and relative imports, count ``TYPE_CHECKING`` imports (annotation-only edges) in
+cycles and layers, and rank modules by their longest layer prefix."""
 
 from __future__ import annotations
 
@@ -45,12 +45,46 @@ def test_imports_inside_functions_and_relative_ones_are_seen(tmp_path: Path) -> 
     assert [(i.source, i.target) for i in upward] == [("pytest_sal.engine.a", "pytest_sal.report.b")]
 
 
-def test_cycles_count_every_level_but_type_checking(tmp_path: Path) -> None:
+def test_cycles_count_every_level_type_checking_included(tmp_path: Path) -> None:
     Import = import_graph.Import
     edges = [Import("a", "b", 1, False, False), Import("b", "c", 1, True, False), Import("c", "a", 1, False, False)]
     assert import_graph.find_cycles(edges) == [["a", "b", "c"]]
+    assert import_graph.annotation_edges(["a", "b", "c"], edges) == ""
     edges[2] = Import("c", "a", 1, False, True)
-    assert import_graph.find_cycles(edges) == []
+    assert import_graph.find_cycles(edges) == [["a", "b", "c"]]
+    assert import_graph.annotation_edges(["a", "b", "c"], edges) == " (annotation-only: c -> a)"
+    edges.append(Import("c", "a", 9, True, False))  # the same edge at run time too: not annotation-only
+    assert import_graph.annotation_edges(["a", "b", "c"], edges) == ""
+
+
+def test_an_annotation_only_cycle_fails_the_check(tmp_path: Path, monkeypatch, capsys) -> None:
+    """The shape ``sal_modules.base`` / ``params`` / ``param_refs`` had: run-time imports one way,
+    ``TYPE_CHECKING`` imports back."""
+    modules = write(
+        tmp_path,
+        {
+            "sal_modules.base": "from sal_modules.refs import Ref\n",
+            "sal_modules.refs": "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from sal_modules.base import Base\n",
+        },
+    )
+    monkeypatch.setattr(import_graph, "all_modules", lambda: modules)
+    assert import_graph.main([]) == 1
+    out = capsys.readouterr().out
+    assert "cycle: sal_modules.base <-> sal_modules.refs (annotation-only: sal_modules.refs -> sal_modules.base)" in out
+    assert "1 under TYPE_CHECKING" in out
+
+
+def test_an_upward_type_checking_import_is_upward(tmp_path: Path, monkeypatch, capsys) -> None:
+    modules = write(
+        tmp_path,
+        {
+            "sal_adapters.x": "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from pytest_sal.engine import y\n",
+            "pytest_sal.engine.y": "",
+        },
+    )
+    monkeypatch.setattr(import_graph, "all_modules", lambda: modules)
+    assert import_graph.main([]) == 1
+    assert "upward import: sal_adapters.x -> pytest_sal.engine.y line 3 (TYPE_CHECKING)" in capsys.readouterr().out
 
 
 def test_layers_rank_by_the_longest_prefix() -> None:

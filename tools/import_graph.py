@@ -4,11 +4,15 @@
 Reads every ``.py`` file's ``import`` statements with ``ast`` (top level and inside functions,
 ``TYPE_CHECKING`` blocks marked as such) and reports:
 
-* an **upward import**: a module importing from a higher layer (``LAYERS`` below, lowest first);
+* an **upward import**: a module importing from a higher layer (``LAYERS`` below, lowest first),
+  ``TYPE_CHECKING`` imports included;
 * a **pytest import below the plugin surface**: only the top-level modules of ``pytest_sal``
   (plugin, session, api, ...) may import ``pytest`` (or ``_pytest``, ``xdist``, ``pytest_html``);
 * a **cycle** among modules (strongly connected components of more than one module, counting
-  imports at every level, ``TYPE_CHECKING`` ones excepted since they never run).
+  imports at every level). Imports under ``if TYPE_CHECKING:`` count too: they never run, but
+  two modules whose types name each other are one room, and a cycle of annotations becomes a
+  cycle of imports the day one of them is needed at run time. A cycle line names its
+  annotation-only edges.
 
 Exit status 1 when either exists, so ``.ci/run`` can hold the line. ``--dot FILE`` writes the
 package-level graph in Graphviz form; ``--modules`` prints every module's imports.
@@ -158,11 +162,11 @@ def layer_of(module: str) -> int:
 
 
 def find_cycles(imports: list[Import]) -> list[list[str]]:
-    """Strongly connected components of more than one module (Tarjan), ``TYPE_CHECKING`` left out.
-    A package's ``__init__`` re-exporting its own submodules is not a cycle edge."""
+    """Strongly connected components of more than one module (Tarjan), ``TYPE_CHECKING`` imports
+    included. A package's ``__init__`` re-exporting its own submodules is not a cycle edge."""
     graph: dict[str, set[str]] = defaultdict(set)
     for imp in imports:
-        if imp.type_checking or imp.target.startswith(imp.source + "."):
+        if imp.target.startswith(imp.source + "."):
             continue
         graph[imp.source].add(imp.target)
     index: dict[str, int] = {}
@@ -206,7 +210,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     modules = all_modules()
     imports = collect_imports(modules)
-    upward = [imp for imp in imports if not imp.type_checking and layer_of(imp.target) > layer_of(imp.source)]
+    upward = [imp for imp in imports if layer_of(imp.target) > layer_of(imp.source)]
     cycles = find_cycles(imports)
     pytest_below = pytest_imports(modules)
     if args.modules:
@@ -217,16 +221,33 @@ def main(argv: list[str] | None = None) -> int:
         lines = ["digraph imports {", "  rankdir=BT;"] + [f'  "{a}" -> "{b}";' for a, b in sorted(edges)] + ["}"]
         args.dot.write_text("\n".join(lines) + "\n")
     function_level = sum(imp.in_function for imp in imports)
-    print(f"{len(modules)} modules, {len(imports)} imports between them ({function_level} inside functions)")
+    annotation_only = sum(imp.type_checking for imp in imports)
+    print(
+        f"{len(modules)} modules, {len(imports)} imports between them "
+        f"({function_level} inside functions, {annotation_only} under TYPE_CHECKING; all count)"
+    )
     for imp in upward:
         print(f"upward import: {imp}  (layer {layer_of(imp.source)} imports layer {layer_of(imp.target)})")
     for cycle in cycles:
-        print(f"cycle: {' <-> '.join(cycle)}")
+        print(f"cycle: {' <-> '.join(cycle)}{annotation_edges(cycle, imports)}")
     for line in pytest_below:
         print(f"pytest below the plugin surface: {line}")
     if not upward and not cycles and not pytest_below:
         print("no upward import, no cycle, pytest only in the plugin surface")
     return 1 if upward or cycles or pytest_below else 0
+
+
+def annotation_edges(cycle: list[str], imports: list[Import]) -> str:
+    """`` (annotation-only: a -> b, ...)`` for the edges of ``cycle`` that exist only under
+    ``TYPE_CHECKING``, else ``""``."""
+    members = set(cycle)
+    edges: dict[tuple[str, str], bool] = {}
+    for imp in imports:
+        if imp.source in members and imp.target in members:
+            edge = (imp.source, imp.target)
+            edges[edge] = edges.get(edge, True) and imp.type_checking
+    only = sorted(f"{a} -> {b}" for (a, b), annotation in edges.items() if annotation)
+    return f" (annotation-only: {', '.join(only)})" if only else ""
 
 
 def _package(module: str) -> str:
