@@ -105,7 +105,7 @@ class BoundaryCheck(RegressionCheck):
 
     A noisy system's boundary is statistical: its ``s_R`` regressed when the probability that
     it moved toward the mild side by more than the limit, from the baseline's runs to this
-    run's, reaches the current outcome's confidence (``engine.reliability_compare``).
+    run's, reaches the current outcome's confidence (``engine.search.reliability_compare``).
     """
 
     limit: float

@@ -353,7 +353,8 @@ class TrialRunner:
 
 
 def _not_cached(record: dict[str, Any]) -> str | None:
-    """Why a run record must not be stored (``TrialRunner._run`` sets it): the machine decided it."""
+    """Why a run record must not be stored (``pytest_sal.engine.execution.run_job.failed_output``
+    sets it): the machine decided it."""
     return record.get("not_cached")
 
 
