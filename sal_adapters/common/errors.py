@@ -1,10 +1,13 @@
-"""Error and warning classes shared by every pytest-sal package.
+"""The root error class of every pytest-sal package, and the adapters' shared errors and warnings.
 
-``SalError`` is the one root: the plugin and the ``sal`` command catch it and print its
-message without a traceback. ``DatasetError`` names the file (and line) that is wrong;
-``WriteError`` the file or folder that could not be written. ``CacheWarning`` says that a
-damaged cache entry (a stored frame of the synthetic world, a trial result) was discarded and
-computed again, or that a cache cannot be written (read-only, full).
+``SalError`` is the one root: the plugin and the ``sal`` command catch it and print its message
+without a traceback. Every other error class derives from it and lives beside the code that
+raises it (``sal_modules.errors``, ``sal_wrappers.base.SlamSystemError``,
+``pytest_sal.engine.execution.executor.ExecutorError``, ...; ARCHITECTURE.md lists them).
+``DatasetError`` names the file (and line) that is wrong; ``WriteError`` the file or folder that
+could not be written. ``CacheWarning`` says that a damaged cache entry (a stored frame of the
+synthetic world, a trial result) was discarded and computed again, or that a cache cannot be
+written (read-only, full).
 """
 
 from __future__ import annotations
