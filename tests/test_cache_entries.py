@@ -20,7 +20,7 @@ from pytest_sal.store.trial_cache import (
     CacheError,
     CacheWarning,
     ContentCache,
-    default_cache_dir,
+    content_cache_dir,
 )
 from sal_adapters import open_dataset, write_sequence
 
@@ -220,7 +220,7 @@ def test_cli_info_and_clear(tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
 
 def test_cli_default_dir_errors_and_help(tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.chdir(tmp_path)
-    ContentCache(default_cache_dir()).put(_key(1), {"a": 1})
+    ContentCache(content_cache_dir()).put(_key(1), {"a": 1})
     assert main(["cache", "clear"]) == 0
     assert "removed 1 cache entries" in capsys.readouterr().out
     (tmp_path / "afile").write_text("")

@@ -63,7 +63,7 @@ def run_search(
     warm_start: tuple[float | None, float | None] | None = None,
 ) -> SearchResult:
     """The boundary search of ``requirement`` with ``runner`` (a deterministic system: one run
-    a trial, every verdict final): a round's trials are evaluated in threads, as many as
+    a trial, every verdict final): a round's trials are run in threads, as many as
     ``search_width`` allows; a trial left off the search path is marked ``Trial.speculative``."""
     envelope = requirement.envelope
     assert envelope is not None
@@ -73,12 +73,12 @@ def run_search(
     max_trials = requirement.options.get("max_trials", settings.max_trials)
     _refuse_unchanged(runner, requirement)
 
-    def evaluate(value: float) -> tuple[bool, Trial]:
-        trial = runner.evaluate(value)
+    def run_trial(value: float) -> tuple[bool, Trial]:
+        trial = runner.run_trial(value)
         return trial.passed, trial
 
     result = boundary_search(
-        evaluate,
+        run_trial,
         space,
         envelope.value,
         tolerance,
@@ -139,7 +139,7 @@ def single_outcome(
     settled at ``confidence``, or ``max_runs`` are spent."""
     if runner.policy.noisy:
         return _noisy_outcome(runner, requirement, settings or SearchSettings(), test_id, value, single=True, earlier=earlier)
-    trial = runner.evaluate(value)
+    trial = runner.run_trial(value)
     boundary = Boundary(value if trial.passed else None, None if trial.passed else value, runner.ref.unit)
     return _outcome(runner, requirement, test_id, "passed" if trial.passed else "failed", boundary, "single", [trial], [])
 
