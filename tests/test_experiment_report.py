@@ -53,7 +53,7 @@ CONFIG = {
         "lower_bound": 5,
         "upper_bound": 400,
         "tolerance": 20,
-        "max_iters": 3,
+        "max_trials": 3,
         "ate_rmse_fail": 1.0,
     },
 }

@@ -35,10 +35,12 @@ examples:
   sal boundary exp.yaml --slam orbslam3 --executor ray --ray-address auto   # runs as Ray tasks, several at once
 
 The config needs an enabled robustness_boundary block (target_perturbation, parameter,
-lower_bound, upper_bound, tolerance, max_iters, ate_rmse_fail, fail_on_tracking_failure).
+lower_bound, upper_bound, tolerance, max_trials, ate_rmse_fail, fail_on_tracking_failure;
+max_iters, the old name of max_trials, is read with a deprecation warning). tolerance is a
+number in the parameter's unit or a percent of the bracket's larger end, such as "10%".
 A trial passes when ate_rmse < ate_rmse_fail and, with fail_on_tracking_failure (the default),
 tracking_rate >= 0.5. The search starts at the mild end of the range and bisects the failure
-point down to tolerance (or max_iters trials).
+point down to tolerance (or max_trials trials).
 
 Writes <base_dir>/<name>/robustness_boundary/<slam>/<boundary name>/boundary_summary.json
 (the search's outcome: pass and fail value, every trial with its runs, metrics and verdict,
@@ -102,7 +104,7 @@ def _print_setup(search: BoundarySearch) -> None:
     unit = _unit_text(search)
     print(
         f"boundary    {rb.name}: {ref.label} in {rb.lower_bound:g} .. {rb.upper_bound:g}{unit} (gets worse {ref.param.worse}), "
-        f"tolerance {rb.tolerance:g}{unit}, max_iters {rb.max_iters}"
+        f"tolerance {rb.tolerance_text(search.ref.unit)}, max_trials {rb.max_trials}"
     )
     print(f"system      {system.name} {json.dumps(system.options(), sort_keys=True)}, up to {search.max_runs} run(s) per trial")
     print(f"dataset     {search.config.dataset.type} {clean.name}: {len(clean)} frames, {clean.sensor}")
@@ -132,6 +134,6 @@ def _print_result(search: BoundarySearch, result: BoundaryResult) -> None:
     print(
         f"boundary    {search.ref.label} {outcome.boundary.text()} ({outcome.termination}); "
         f"{len(outcome.trials)} trials, {outcome.runs} runs ({outcome.cached_trials} trials cached) vs {search.sweep_trials} "
-        f"for a linear sweep at {search.block.tolerance:g}{_unit_text(search)} steps; {outcome.confidence()}"
+        f"for a linear sweep at {search.block.tolerance_step:g}{_unit_text(search)} steps; {outcome.confidence()}"
     )
     print(f"wrote {result.summary_path}" + (f"\nwrote {result.plot_path}" if result.plot_path is not None else ""))

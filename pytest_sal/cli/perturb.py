@@ -63,7 +63,7 @@ def _print_plan(plan: PerturbPlan) -> None:
         unit = f" {scale.unit}" if scale.unit else ""
         print(
             f"boundary    {rb.name} ({state}): {rb.target_perturbation}.{rb.parameter} in {rb.lower_bound:g} .. {rb.upper_bound:g}{unit}, "
-            f"tolerance {rb.tolerance:g}, max_iters {rb.max_iters}, ate_rmse_fail {rb.ate_rmse_fail:g} m"
+            f"tolerance {rb.tolerance_text(scale.unit)}, max_trials {rb.max_trials}, ate_rmse_fail {rb.ate_rmse_fail:g} m"
         )
 
 

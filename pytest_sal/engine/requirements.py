@@ -20,6 +20,7 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from pytest_sal.engine.tolerance import parse_tolerance
 from sal_adapters.common.errors import SalError
 from sal_modules.param_refs import Bound, ParamRef
 
@@ -141,7 +142,7 @@ class Requirement:
     Attributes:
         criteria: pass criteria (all must hold).
         envelope: the parameter bound searched, or ``None`` (``sal.sweep`` / ``sal.at`` only).
-        options: ``tolerance``, ``max_trials``, ``runs``, ``search_range``, ``seed``,
+        options: ``tolerance`` (``pytest_sal.engine.tolerance``), ``max_trials``, ``runs``, ``search_range``, ``seed``,
             ``reliability``, ``confidence``, ``max_runs`` as given.
     """
 
@@ -258,8 +259,11 @@ def _check_options(options: Mapping[str, Any], envelope: Bound | None) -> None:
         ):
             raise InvalidRequirement(f"sal.require(): {name} must be a probability between {lowest:g} and 1 (both excluded), got {value!r}")
     tolerance = options.get("tolerance")
-    if tolerance is not None and (not isinstance(tolerance, numbers.Real) or not math.isfinite(tolerance) or tolerance <= 0):
-        raise InvalidRequirement(f"sal.require(): tolerance must be a number > 0 in the parameter's unit, got {tolerance!r}")
+    if tolerance is not None:
+        try:
+            parse_tolerance(tolerance)
+        except ValueError as exc:
+            raise InvalidRequirement(f"sal.require(): tolerance {exc}, got {tolerance!r}") from None
     search_range = options.get("search_range")
     if search_range is not None:
         if envelope is None:

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 from pytest_sal.engine.outcomes.outcome import Boundary, Outcome, Trial
 from pytest_sal.engine.requirements import InvalidRequirement, Requirement
 from pytest_sal.engine.search.bisection import SearchResult, SearchSpace, boundary_search
+from pytest_sal.engine.tolerance import search_tolerances
 from sal_modules.param_refs import ParamRef
 
 if TYPE_CHECKING:  # the plugin reads SearchSettings at configure time, before any trial runs
@@ -25,9 +26,10 @@ class SearchSettings:
     ``sal_reliability``, ``sal_confidence``, ``sal_max_runs``).
 
     Attributes:
-        tolerance_pct: default tolerance: the search stops when the bracket's width is at most
-            this percent of its larger end (20-22 m at 10 %), which suits linear parameters and
-            ones searched over decades (0.08-0.09 Mbit/s) alike.
+        tolerance_pct: default tolerance, in percent (ini ``sal_tolerance = 10%``): the search
+            stops when the bracket's width is at most this percent of its larger end (20-22 m
+            at 10 %), which suits linear parameters and ones searched over decades
+            (0.08-0.09 Mbit/s) alike (``pytest_sal.engine.tolerance``).
         max_trials: default trial budget (a deterministic system's bisection).
         reliability, confidence: a noisy system meets its requirement at the edge when
             ``p(edge) >= reliability`` with this one-sided confidence.
@@ -68,8 +70,7 @@ def run_search(
     envelope = requirement.envelope
     assert envelope is not None
     space = search_space(envelope.ref, requirement.options.get("search_range"))
-    tolerance = requirement.options.get("tolerance")
-    rel_tolerance = None if tolerance is not None else settings.tolerance_pct / 100
+    tolerance, rel_tolerance = search_tolerances(requirement.options, settings.tolerance_pct)
     max_trials = requirement.options.get("max_trials", settings.max_trials)
     _refuse_unchanged(runner, requirement)
 
