@@ -48,7 +48,7 @@ OPTIONS: tuple[tuple[str, dict[str, Any]], ...] = (
             dest="sal_cache_dir",
             metavar="DIR",
             default=None,
-            help="trial cache folder (ini sal_cache_dir). Default: .sal/cache under the rootdir",
+            help="cache folder (ini sal_cache_dir). Default: .sal/cache under the rootdir",
         ),
     ),
     (
@@ -185,7 +185,7 @@ OPTIONS: tuple[tuple[str, dict[str, Any]], ...] = (
 
 #: the ``sal_*`` ini keys: (name, help, default)
 INI_KEYS: tuple[tuple[str, str, str | None], ...] = (
-    ("sal_cache_dir", "trial cache folder (default .sal/cache)", None),
+    ("sal_cache_dir", "cache folder (default .sal/cache)", None),
     ("sal_cache_size", "cache size limit, e.g. 5GB (default: none)", None),
     ("sal_history_dir", "history store (default .sal/history)", None),
     ("sal_baseline", "the run name --sal-compare and --sal-compare-fail compare with (default main)", "main"),
@@ -246,7 +246,7 @@ class SalOptions:
     """What the options and ini keys say for one session, checked.
 
     Attributes:
-        cache_dir, cache_size, use_cache, cache_frames: the trial cache (size limit in bytes,
+        cache_dir, cache_size, use_cache, cache_frames: the cache (size limit in bytes,
             ``None``: none) and whether perturbed sequences are cached too.
         history_dir, save_history, save_name: the run history, whether this run is appended to
             it and under what name (``--sal-save``).

@@ -168,7 +168,7 @@ def test_an_unknown_system_lists_the_known_ones(tmp_path: Path, capsys: pytest.C
 def test_an_option_the_system_does_not_take_is_one_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(boundary(tmp_path, "--slam-option", "colour=3")) == 2
     err = capsys.readouterr().err
-    assert err.startswith("sal: error: --slam-option") and "colour" in err
+    assert err.startswith("sal: error: --system-option") and "colour" in err
 
 
 def test_linear_sweep_trials_counts_both_ends() -> None:

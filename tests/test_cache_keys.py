@@ -1,4 +1,4 @@
-"""The trial cache's keys: SHA-256 of the documented canonical JSON, stable across processes,
+"""The cache's keys: SHA-256 of the documented canonical JSON, stable across processes,
 changed by any part and not by order or equal values, unhashable parts named; size parsing and
 the default folder."""
 

@@ -1,4 +1,4 @@
-"""The ``command`` system's name, version and depends: what goes into the trial cache key (the
+"""The ``command`` system's name, version and depends: what goes into the cache key (the
 script, the executable on PATH, depends files and folders), what a crash after writing keeps, and
 the clear errors for bad values."""
 

@@ -88,7 +88,7 @@ def test_help_lists_the_options_and_a_bad_check_is_a_usage_error(pytester: pytes
     helped.stdout.fnmatch_lines(
         [
             "SLAM robustness (pytest-sal):",
-            "*--sal-cache-dir=DIR*trial cache folder*",
+            "*--sal-cache-dir=DIR*cache folder*",
             "*--sal-no-cache*",
             "*--sal-history-dir=DIR*",
             "*--sal-compare-fail=CHECK*",

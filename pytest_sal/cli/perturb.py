@@ -1,6 +1,6 @@
 """``sal perturb CONFIG``: validate an experiment config, print the plan, then write each enabled
 perturbation's sequence in the dataset's own layout under ``<base_dir>/<name>/images/<perturbation>/``
-(``pytest_sal.experiment.perturb``), through the trial cache, with progress bars and a timing table."""
+(``pytest_sal.experiment.perturb``), through the cache, with progress bars and a timing table."""
 
 from __future__ import annotations
 

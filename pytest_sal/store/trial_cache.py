@@ -1,4 +1,4 @@
-"""The content-addressed cache of trial results and perturbed sequences.
+"""The content-addressed cache of runs and perturbed sequences (one entry each).
 
 A trial (perturb a dataset at one severity, run a SLAM system N times, score with evo) is named
 by :func:`pytest_sal.store.cache_keys.cache_key` of everything that decides its outcome: the dataset fingerprint, the module
