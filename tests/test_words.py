@@ -154,3 +154,13 @@ def test_ini_and_decorator_percents_search_alike_and_the_old_ini_number_warns(py
     old.assert_outcomes(passed=3)
     assert "SalDeprecationWarning: ini option sal_tolerance = 10: a bare number is the old form" in output(old)
     assert json.loads((pytester.path / "trials.json").read_text()) == trials and calls(pytester) == ran  # the same trials, cached
+
+
+@pytest.mark.parametrize("command", ["boundary", "evaluate"])
+def test_the_commands_name_the_system_system_and_still_take_slam(command: str) -> None:
+    from pytest_sal.cli.main import build_parser
+
+    parser = build_parser()
+    new = parser.parse_args([command, "exp.yaml", "--system", "fake", "--system-option", "a=1"])
+    old = parser.parse_args([command, "exp.yaml", "--slam", "fake", "--slam-option", "a=1"])
+    assert (new.slam, new.slam_option) == (old.slam, old.slam_option) == ("fake", ["a=1"])
