@@ -1,4 +1,4 @@
-"""sal boundary CONFIG --slam NAME: the robustness_boundary block searched with the plugin's
+"""sal boundary CONFIG --system NAME: the robustness_boundary block searched with the plugin's
 boundary search, on a fake SLAM system whose boundary is known exactly."""
 
 from __future__ import annotations

@@ -145,7 +145,7 @@ def test_slots_count_the_share_of_the_cluster_less_the_runs_in_flight(executor: 
     assert RayExecutor(num_cpus=4, share=2).slots(create("reference_vo")) == 2  # two xdist workers share 4 CPUs
     sleepy = SleepySlam(sleep_s=1.5)
     job = runner(tmp_path, sleepy, executor)
-    running = threading.Thread(target=job.evaluate, args=(30.0,))
+    running = threading.Thread(target=job.run_trial, args=(30.0,))
     running.start()
     deadline = time.monotonic() + 5
     while executor.slots(sleepy) == 2 and time.monotonic() < deadline:
