@@ -1,5 +1,5 @@
 """A suite of 8 robustness requirements with the deterministic ``reference_vo`` on the synthetic
-worlds, run cold (an empty trial cache) as ``pytest -n 2`` with the local executor and with
+worlds, run cold (an empty cache) as ``pytest -n 2`` with the local executor and with
 ``--sal-executor ray`` (a local Ray of 2 CPUs started for the session), without and with
 ``-n 2``: the wall time of each, the trials and runs, and whether every boundary agrees.
 

@@ -11,7 +11,7 @@ As shipped, nothing here is active: every test gets the plugin's defaults,
 
 Uncomment one of the blocks below to point the suites at real data or another system. A
 fixture defined here applies to every test below this folder; put one in
-``weather/conftest.py`` to change only that suite. The trial cache key holds the dataset's
+``weather/conftest.py`` to change only that suite. The cache key holds the dataset's
 fingerprint and the system's name, version and options, so switching either never reuses old
 results.
 """

@@ -32,7 +32,7 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 def require(
     *criteria_and_envelope: Any,
-    tolerance: float | None = None,
+    tolerance: float | str | None = None,
     max_trials: int | None = None,
     runs: int | None = None,
     search_range: tuple[float, float] | None = None,
@@ -45,9 +45,9 @@ def require(
 
     ``@sal.require(ate_rmse < 1.5, fog.visibility_m >= 25)`` makes the test one boundary search:
     the envelope's edge (25 m) decides pass or fail, then bisection between the edge and the far
-    end of the search range locates the failure boundary within ``tolerance`` (parameter unit;
-    default: ini ``sal_tolerance`` percent of the edge) in at most ``max_trials`` trials of
-    ``runs`` runs each. Without an envelope, use it with ``sal.sweep`` or ``sal.at``.
+    end of the search range locates the failure boundary within ``tolerance`` (a number: in the
+    parameter's unit; ``"10%"``: of the bracket's larger end; default: ini ``sal_tolerance``,
+    10%) in at most ``max_trials`` trials (ini ``sal_max_trials``) of ``runs`` runs each. Without an envelope, use it with ``sal.sweep`` or ``sal.at``.
 
     A noisy system (ORB-SLAM3) holds a requirement with a probability that falls with
     severity: the test passes when ``p(edge) >= reliability`` at ``confidence`` (one-sided;

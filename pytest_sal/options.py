@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 import pytest
 
 from pytest_sal.history.gate import MISSING_POLICIES, space_form_problem
+from sal_adapters.common.errors import SalDeprecationWarning
 
 if TYPE_CHECKING:
     from pytest_sal.engine.search.requirement_search import SearchSettings
@@ -47,7 +48,7 @@ OPTIONS: tuple[tuple[str, dict[str, Any]], ...] = (
             dest="sal_cache_dir",
             metavar="DIR",
             default=None,
-            help="trial cache folder (ini sal_cache_dir). Default: .sal/cache under the rootdir",
+            help="cache folder (ini sal_cache_dir). Default: .sal/cache under the rootdir",
         ),
     ),
     (
@@ -184,12 +185,12 @@ OPTIONS: tuple[tuple[str, dict[str, Any]], ...] = (
 
 #: the ``sal_*`` ini keys: (name, help, default)
 INI_KEYS: tuple[tuple[str, str, str | None], ...] = (
-    ("sal_cache_dir", "trial cache folder (default .sal/cache)", None),
+    ("sal_cache_dir", "cache folder (default .sal/cache)", None),
     ("sal_cache_size", "cache size limit, e.g. 5GB (default: none)", None),
     ("sal_history_dir", "history store (default .sal/history)", None),
     ("sal_baseline", "the run name --sal-compare and --sal-compare-fail compare with (default main)", "main"),
     ("sal_compare_missing", "pass or fail: a test with no baseline to compare with (default pass)", "pass"),
-    ("sal_tolerance", "default search tolerance: the bracket's width in percent of its larger end (default 10)", "10"),
+    ("sal_tolerance", "default search tolerance, a percent of the bracket's larger end, e.g. 5% (default 10%)", "10%"),
     ("sal_max_trials", "default trial budget of a boundary search (default 8)", "8"),
     ("sal_reliability", "noisy systems: the share of runs that must hold the requirement at the envelope's edge (default 0.8)", "0.8"),
     ("sal_confidence", "noisy systems: the one-sided confidence that this reliability is met (default 0.9)", "0.9"),
@@ -223,7 +224,6 @@ _INI_NUMBERS: dict[str, tuple[type, float, bool, str]] = {
     "sal_runs": (int, 1, False, "a whole number >= 1 (the most runs per trial), or auto"),
     "sal_seed": (int, 0, False, "a whole number >= 0 (perturbation seed)"),
     "sal_max_trials": (int, 1, False, "a whole number >= 1 (trials per boundary search)"),
-    "sal_tolerance": (float, 0.0, True, "a number > 0 (percent of the boundary value)"),
     "sal_reliability": (float, 0.0, True, "a probability between 0 and 1 (the share of runs that must hold)"),
     "sal_confidence": (float, 0.5, True, "a probability between 0.5 and 1 (one-sided confidence)"),
     "sal_max_runs": (int, 1, False, "a whole number >= 1 (runs per search of a noisy system)"),
@@ -246,7 +246,7 @@ class SalOptions:
     """What the options and ini keys say for one session, checked.
 
     Attributes:
-        cache_dir, cache_size, use_cache, cache_frames: the trial cache (size limit in bytes,
+        cache_dir, cache_size, use_cache, cache_frames: the cache (size limit in bytes,
             ``None``: none) and whether perturbed sequences are cached too.
         history_dir, save_history, save_name: the run history, whether this run is appended to
             it and under what name (``--sal-save``).
@@ -319,7 +319,7 @@ def read_options(config: pytest.Config) -> SalOptions:
         system_name=config.getini("sal_system") or None,
         kitti_segments=_ini_segments(config),
         search=SearchSettings(
-            tolerance_pct=_ini_number(config, "sal_tolerance"),
+            tolerance_pct=_ini_tolerance(config),
             max_trials=int(_ini_number(config, "sal_max_trials")),
             reliability=_ini_probability(config, "sal_reliability"),
             confidence=_ini_probability(config, "sal_confidence"),
@@ -416,6 +416,21 @@ def _ini_number(config: pytest.Config, name: str) -> float:
     if value is None or not math.isfinite(value) or value < smallest or (exclusive and value == smallest):
         raise pytest.UsageError(f"pytest-sal: ini option {name} = {text!r}: expected {what}")
     return float(value) if kind is float else int(value)
+
+
+def _ini_tolerance(config: pytest.Config) -> float:
+    """ini ``sal_tolerance`` as a percent (``pytest_sal.engine.tolerance``); its old form, a bare
+    number, is read as one with a deprecation warning (once, by the controller)."""
+    from pytest_sal.engine.tolerance import ini_tolerance_percent
+
+    text = str(config.getini("sal_tolerance"))
+    try:
+        percent, deprecated = ini_tolerance_percent(text)
+    except ValueError as exc:
+        raise pytest.UsageError(f"pytest-sal: ini option sal_tolerance = {text.strip()!r}: {exc}") from None
+    if deprecated and not hasattr(config, "workerinput"):
+        config.issue_config_time_warning(SalDeprecationWarning(deprecated), stacklevel=2)
+    return percent
 
 
 def _ini_probability(config: pytest.Config, name: str) -> float:

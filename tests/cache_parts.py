@@ -1,4 +1,4 @@
-"""What the trial cache tests share (test_cache_keys.py, test_cache_entries.py,
+"""What the cache tests share (test_cache_keys.py, test_cache_entries.py,
 test_cache_processes.py): the repository root, the key parts they start from and ``_key``, a key per number."""
 
 from __future__ import annotations

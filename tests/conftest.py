@@ -147,11 +147,11 @@ def isolated_sal_cache(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Pat
 
     root = tmp_path_factory.mktemp("sal-cache")
     commands_cache = tmp_path_factory.mktemp("commands-trial-cache")
-    default = pytest_sal.store.trial_cache.default_cache_dir
+    default = pytest_sal.store.trial_cache.content_cache_dir
     with pytest.MonkeyPatch.context() as patch:
         patch.setenv("SAL_CACHE_DIR", str(root))
         patch.setattr(
-            pytest_sal.store.trial_cache, "default_cache_dir", lambda rootdir=None: commands_cache if rootdir is None else default(rootdir)
+            pytest_sal.store.trial_cache, "content_cache_dir", lambda rootdir=None: commands_cache if rootdir is None else default(rootdir)
         )
         yield root
 

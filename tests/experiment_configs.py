@@ -43,7 +43,7 @@ def base_config(tmp_path: Path, **changes: Any) -> dict[str, Any]:
             "lower_bound": 10,
             "upper_bound": 200,
             "tolerance": 5,
-            "max_iters": 4,
+            "max_trials": 4,
             "ate_rmse_fail": 1.0,
         },
     }

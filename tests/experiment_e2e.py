@@ -52,7 +52,7 @@ PERTURBATIONS = ("fog", "fog_heavy", "rain", "rain_soiled_lens")
 MILD = ("fog", "rain", "rain_soiled_lens")
 #: 4 m visibility: the images are a flat grey; neither system tracks a frame (measured: 0/20)
 FAILING = "fog_heavy"
-BOUNDARY: dict[str, Any] = {"name": "fog_visibility", "lower": 2, "upper": 500, "tolerance": 5, "max_iters": 4, "ate_rmse_fail": 0.5}
+BOUNDARY: dict[str, Any] = {"name": "fog_visibility", "lower": 2, "upper": 500, "tolerance": 5, "max_trials": 4, "ate_rmse_fail": 0.5}
 STEMS = [f"{i:06d}" for i in range(FRAMES)]
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -82,7 +82,7 @@ def write_config(folder: Path) -> Path:
             "lower_bound": BOUNDARY["lower"],
             "upper_bound": BOUNDARY["upper"],
             "tolerance": BOUNDARY["tolerance"],
-            "max_iters": BOUNDARY["max_iters"],
+            "max_trials": BOUNDARY["max_trials"],
             "ate_rmse_fail": BOUNDARY["ate_rmse_fail"],
         },
     }

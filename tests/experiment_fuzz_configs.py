@@ -190,7 +190,7 @@ def boundaries(draw: st.DrawFn, entries: list[dict[str, Any]]) -> dict[str, Any]
         "lower_bound": lower,
         "upper_bound": upper,
         "tolerance": draw(st.floats(0.01, 10)),
-        "max_iters": draw(st.integers(1, 12)),
+        "max_trials": draw(st.integers(1, 12)),
         "ate_rmse_fail": draw(st.floats(0.01, 10)),
     }
 

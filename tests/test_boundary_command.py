@@ -1,4 +1,4 @@
-"""sal boundary CONFIG --slam NAME: the robustness_boundary block searched with the plugin's
+"""sal boundary CONFIG --system NAME: the robustness_boundary block searched with the plugin's
 boundary search, on a fake SLAM system whose boundary is known exactly."""
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ robustness_boundary:
   lower_bound: 5
   upper_bound: 100
   tolerance: 1
-  max_iters: 10
+  max_trials: 10
   ate_rmse_fail: 1000
   fail_on_tracking_failure: true
 """
@@ -97,7 +97,7 @@ def test_boundary_brackets_the_known_failure_point_and_a_rerun_is_all_cached(tmp
     assert len(trials) <= 10
     assert experiment["linear_sweep_trials"] == 96 > len(trials)
     assert experiment["config"] == str(tmp_path / "exp.yaml") and experiment["module"] == "fog"
-    assert (experiment["lower_bound"], experiment["upper_bound"], experiment["tolerance"], experiment["max_iters"]) == (5, 100, 1, 10)
+    assert (experiment["lower_bound"], experiment["upper_bound"], experiment["tolerance"], experiment["max_trials"]) == (5, 100, 1, 10)
     assert experiment["plot"] == str(folder / "boundary_plot.png")
     # one progress line per trial, in order (the trial line of the plugin's live progress), and
     # the summary line with both counts
@@ -168,7 +168,7 @@ def test_an_unknown_system_lists_the_known_ones(tmp_path: Path, capsys: pytest.C
 def test_an_option_the_system_does_not_take_is_one_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(boundary(tmp_path, "--slam-option", "colour=3")) == 2
     err = capsys.readouterr().err
-    assert err.startswith("sal: error: --slam-option") and "colour" in err
+    assert err.startswith("sal: error: --system-option") and "colour" in err
 
 
 def test_linear_sweep_trials_counts_both_ends() -> None:
@@ -189,7 +189,7 @@ OLD_SUMMARY = {
     "lower_bound": 5.0,
     "upper_bound": 100.0,
     "tolerance": 1.0,
-    "max_iters": 10,
+    "max_iters": 10,  # the old name of max_trials
     "requirement": "ate_rmse < 1000 m and tracking_rate >= 0.5 wherever fog.visibility_m >= 100 m",
     "system": "fake",
     "system_options": {},
@@ -250,7 +250,7 @@ def test_a_summary_of_the_old_flat_form_is_read_as_the_new_one() -> None:
         "lower_bound": 5.0,
         "upper_bound": 100.0,
         "tolerance": 1.0,
-        "max_iters": 10,
+        "max_trials": 10,
         "reliability": None,  # the old form had no statistical search
         "confidence": None,
         "max_runs": None,

@@ -1,4 +1,4 @@
-"""The trial cache's entries: put/get round trip, layout and .gitignore, corrupt entries, compute
+"""The cache's entries: put/get round trip, layout and .gitignore, corrupt entries, compute
 once, exceptions store nothing, folders written as sequences, LRU eviction, clear, and
 ``sal cache``."""
 
@@ -20,7 +20,7 @@ from pytest_sal.store.trial_cache import (
     CacheError,
     CacheWarning,
     ContentCache,
-    default_cache_dir,
+    content_cache_dir,
 )
 from sal_adapters import open_dataset, write_sequence
 
@@ -204,7 +204,7 @@ def test_cli_info_and_clear(tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
     cache.compute_dir(_key(2), lambda d: (d / "f").write_text("y" * 500))
     assert main(["cache", "info", "--cache-dir", str(root)]) == 0
     out = capsys.readouterr().out
-    assert str(root) in out and "entries  2 (1 trial results, 1 sequences)" in out and "2.9 kB" in out  # each entry names its 64-digit key
+    assert str(root) in out and "entries  2 (1 runs, 1 sequences)" in out and "2.9 kB" in out  # each entry names its 64-digit key
     assert main(["cache", "info", "--cache-dir", str(root), "--json"]) == 0
     info = json.loads(capsys.readouterr().out)
     assert info == {"root": str(root), "entries": 2, "results": 1, "folders": 1, "bytes": cache.stats()["bytes"]}
@@ -220,7 +220,7 @@ def test_cli_info_and_clear(tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
 
 def test_cli_default_dir_errors_and_help(tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.chdir(tmp_path)
-    ContentCache(default_cache_dir()).put(_key(1), {"a": 1})
+    ContentCache(content_cache_dir()).put(_key(1), {"a": 1})
     assert main(["cache", "clear"]) == 0
     assert "removed 1 cache entries" in capsys.readouterr().out
     (tmp_path / "afile").write_text("")

@@ -116,26 +116,26 @@ ATTACKS: dict[str, tuple[Callable[[bytes], bytes], str]] = {
 def test_an_attacked_trial_entry_is_discarded_and_run_again(tmp_path: Path, attack: str) -> None:
     damage, expected = ATTACKS[attack]
     log = tmp_path / "calls.jsonl"
-    first = runner(tmp_path, FakeSlam(calls_file=str(log))).evaluate(20.0)
+    first = runner(tmp_path, FakeSlam(calls_file=str(log))).run_trial(20.0)
     session = runner(tmp_path, FakeSlam(calls_file=str(log)))
     entry = session.cache.path(session.key(20.0, 0))
     entry.write_bytes(damage(entry.read_bytes()))
-    again, messages = cache_warnings(lambda: session.evaluate(20.0))
+    again, messages = cache_warnings(lambda: session.run_trial(20.0))
     assert len(messages) == 1 and messages[0].startswith(f"{entry}: bad cache entry, removed and computed again: ")
     assert expected in messages[0] and "\n" not in messages[0]
     assert calls(log) == 2 and not again.cached and again.metrics == first.metrics and again.passed == first.passed
-    healed, messages = cache_warnings(lambda: runner(tmp_path, FakeSlam(calls_file=str(log))).evaluate(20.0))
+    healed, messages = cache_warnings(lambda: runner(tmp_path, FakeSlam(calls_file=str(log))).run_trial(20.0))
     assert messages == [] and healed.cached and healed.metrics == first.metrics and calls(log) == 2
 
 
 def test_a_valid_entry_copied_under_another_key_is_not_served(tmp_path: Path) -> None:
     log = tmp_path / "calls.jsonl"
     first = runner(tmp_path, FakeSlam(calls_file=str(log)))
-    holds, fails = first.evaluate(40.0), first.evaluate(10.0)
+    holds, fails = first.run_trial(40.0), first.run_trial(10.0)
     assert holds.passed and not fails.passed
     entry = first.cache.path(first.key(10.0, 0))
     entry.write_bytes(first.cache.path(first.key(40.0, 0)).read_bytes())  # the passing trial's entry, checksum and all
-    again, messages = cache_warnings(lambda: runner(tmp_path, FakeSlam(calls_file=str(log))).evaluate(10.0))
+    again, messages = cache_warnings(lambda: runner(tmp_path, FakeSlam(calls_file=str(log))).run_trial(10.0))
     assert not again.passed and not again.cached and again.metrics == fails.metrics and calls(log) == 3
     assert len(messages) == 1 and messages[0].startswith(f"{entry}: bad cache entry, removed and computed again: it is the entry of key ")
     assert f"not of {first.key(10.0, 0)[:12]}... (copied from another entry)" in messages[0]
@@ -243,16 +243,16 @@ def test_a_new_cache_on_a_full_disk_costs_the_cache_not_the_verdict(tmp_path: Pa
     root = tmp_path / "cache"
     fill_disk_under(root, monkeypatch.setattr)
     session = runner(tmp_path, FakeSlam(calls_file=str(log)))
-    (holds, fails), messages = cache_warnings(lambda: (session.evaluate(40.0), session.evaluate(10.0)))
+    (holds, fails), messages = cache_warnings(lambda: (session.run_trial(40.0), session.run_trial(10.0)))
     assert holds.passed and not fails.passed and not holds.cached and not fails.cached
     assert messages == [f"the cache at {root} {FULL}"]
     assert not [p for p in root.rglob("*") if p.is_file()]  # no entry, no .gitignore, nothing half-written
     assert session.cache is not None and session.cache.unwritable == "No space left on device"
 
     monkeypatch.undo()  # room again: the next session stores its results
-    again, messages = cache_warnings(lambda: runner(tmp_path, FakeSlam(calls_file=str(log))).evaluate(10.0))
+    again, messages = cache_warnings(lambda: runner(tmp_path, FakeSlam(calls_file=str(log))).run_trial(10.0))
     assert messages == [] and not again.passed and calls(log) == 3
-    assert (root / ".gitignore").is_file() and runner(tmp_path, FakeSlam(calls_file=str(log))).evaluate(10.0).cached
+    assert (root / ".gitignore").is_file() and runner(tmp_path, FakeSlam(calls_file=str(log))).run_trial(10.0).cached
 
 
 def test_a_cache_that_fills_up_serves_what_it_holds_and_stores_nothing_more(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -327,12 +327,12 @@ def test_a_failure_the_machine_decided_is_not_cached(tmp_path: Path, monkeypatch
     monkeypatch.setattr("pytest_sal.engine.execution.run_job.machine_load", lambda: load)
     log = tmp_path / "calls.jsonl"
     first = runner(tmp_path, Failing(how, calls_file=str(log)))
-    trial = first.evaluate(40.0)
+    trial = first.run_trial(40.0)
     assert not trial.passed and trial.metrics["tracking_rate"] == 0.0  # this session's verdict stands
     if reason is None:
         assert "not_cached" not in trial.runs[0]
     else:
         assert trial.runs[0]["not_cached"].startswith(reason)
     assert first.cache.path(first.key(40.0, 0)).exists() == (reason is None)
-    again = runner(tmp_path, Failing(how, calls_file=str(log))).evaluate(40.0)
+    again = runner(tmp_path, Failing(how, calls_file=str(log))).run_trial(40.0)
     assert calls(log) == (2 if reason else 1) and again.cached == (reason is None)  # the next session runs it again

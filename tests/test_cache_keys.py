@@ -1,4 +1,4 @@
-"""The trial cache's keys: SHA-256 of the documented canonical JSON, stable across processes,
+"""The cache's keys: SHA-256 of the documented canonical JSON, stable across processes,
 changed by any part and not by order or equal values, unhashable parts named; size parsing and
 the default folder."""
 
@@ -20,7 +20,7 @@ from pytest_sal.store.byte_sizes import parse_size
 from pytest_sal.store.cache_keys import cache_key
 from pytest_sal.store.trial_cache import (
     CacheError,
-    default_cache_dir,
+    content_cache_dir,
 )
 from sal_adapters import SalError
 
@@ -121,7 +121,7 @@ def test_parse_size() -> None:
             parse_size(junk)
 
 
-def test_default_cache_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    assert default_cache_dir(tmp_path) == tmp_path / ".sal" / "cache"
+def test_content_cache_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    assert content_cache_dir(tmp_path) == tmp_path / ".sal" / "cache"
     monkeypatch.chdir(tmp_path)
-    assert default_cache_dir() == tmp_path / ".sal" / "cache"
+    assert content_cache_dir() == tmp_path / ".sal" / "cache"

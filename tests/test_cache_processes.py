@@ -1,4 +1,4 @@
-"""The trial cache across processes: a killed compute or put leaves no entry, two processes
+"""The cache across processes: a killed compute or put leaves no entry, two processes
 compute once, and a waiter computes when the holder fails."""
 
 from __future__ import annotations

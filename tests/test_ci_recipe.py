@@ -7,7 +7,7 @@ uses.
 The tiny suite's system is a ``command`` program written here: it tracks a frame (writes its
 true pose) when the frame's contrast (grey-level standard deviation) is above ``THRESHOLD``, so
 fog makes it lose frames and the threshold moves the boundary. The threshold is written into
-the program file, whose hash is in the trial cache key: a changed program is never served old
+the program file, whose hash is in the cache key: a changed program is never served old
 trials.
 """
 

@@ -1,4 +1,4 @@
-"""The ``command`` system's name, version and depends: what goes into the trial cache key (the
+"""The ``command`` system's name, version and depends: what goes into the cache key (the
 script, the executable on PATH, depends files and folders), what a crash after writing keeps, and
 the clear errors for bad values."""
 
@@ -62,12 +62,12 @@ def trial_runner(tmp_path: Path, system):
 def test_editing_the_script_invalidates_cached_trials(tmp_path):
     script = drift_script(tmp_path / "myslam.py", 0.0001)
     argv = [sys.executable, str(script), "{sequence}", "{output}"]
-    first = trial_runner(tmp_path, create("command", argv=argv, layout="tum")).evaluate(30.0)
+    first = trial_runner(tmp_path, create("command", argv=argv, layout="tum")).run_trial(30.0)
     assert not first.cached and first.runs[0]["failure"] is None, first.runs
-    again = trial_runner(tmp_path, create("command", argv=argv, layout="tum")).evaluate(30.0)
+    again = trial_runner(tmp_path, create("command", argv=argv, layout="tum")).run_trial(30.0)
     assert again.cached and again.metrics == first.metrics
     drift_script(script, 0.01)  # a worse SLAM program under the same argv
-    edited = trial_runner(tmp_path, create("command", argv=argv, layout="tum")).evaluate(30.0)
+    edited = trial_runner(tmp_path, create("command", argv=argv, layout="tum")).run_trial(30.0)
     assert not edited.cached
     assert edited.metrics["ate_rmse"] > 10 * first.metrics["ate_rmse"]
 
@@ -87,7 +87,7 @@ def test_a_crash_after_writing_the_trajectory_keeps_it_and_its_ate(tmp_path, cra
 
     def trial(script: Path):
         system = create("command", argv=[sys.executable, str(script), "{sequence}", "{output}"], layout="tum", deterministic=True)
-        return trial_runner(tmp_path / script.stem, system).evaluate(30.0)
+        return trial_runner(tmp_path / script.stem, system).run_trial(30.0)
 
     good, crashed = trial(clean), trial(crashing)
     run = crashed.runs[0]

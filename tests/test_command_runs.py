@@ -249,6 +249,6 @@ def test_a_search_that_drops_every_frame_fails_those_runs_for_every_system(scrip
     command = create("command", argv=fake(scripts), sensor="mono", layout="folder")
     for system in (command, FakeSlam()):
         runner = TrialRunner(indoor.select(range(6)), frame_drop.drop_rate.ref(), system, requirement, workdir=tmp_path / system.name)
-        trial = runner.evaluate(1.0)
+        trial = runner.run_trial(1.0)
         assert not trial.passed, system.name
         assert trial.runs[0]["failure"] == "the sequence has no frames (every frame dropped?): nothing to run on", trial.runs[0]

@@ -164,18 +164,18 @@ def calls(path: Path) -> int:
 def test_a_stopped_run_is_recorded_and_kept_apart_from_full_runs_in_the_cache(tmp_path: Path) -> None:
     log = tmp_path / "calls.jsonl"
     strict = runner(tmp_path, tracking_rate >= 0.9, StoppableFake(calls_file=str(log)))
-    trial = strict.evaluate(20.0)  # tracks 4 of 8: the 5th frame decides
+    trial = strict.run_trial(20.0)  # tracks 4 of 8: the 5th frame decides
     assert not trial.passed and trial.failed == ["tracking_rate >= 0.9"]
     assert trial.runs[0]["stopped"] == "tracking_rate >= 0.9 can no longer hold: 1 of 8 frames not tracked by frame 5 (0.875 at best)"
     assert strict.cache.get(strict.key(20.0)) is None  # type: ignore[union-attr]  # not under the full run's key
     assert strict.cache.get(strict.key(20.0, stop=strict.stop_rule))["metrics"]["stopped"]  # type: ignore[union-attr,index]
     # a milder rule does not read the stopped run: it runs, finishes, and stores under the full key
     mild = runner(tmp_path, tracking_rate >= 0.5, StoppableFake(calls_file=str(log)))
-    milder = mild.evaluate(20.0)
+    milder = mild.run_trial(20.0)
     assert milder.passed and not milder.cached and "stopped" not in milder.runs[0] and calls(log) == 2
     assert mild.cache.get(mild.key(20.0))["metrics"]["tracking_rate"] == 0.5  # type: ignore[union-attr,index]
     # now the strict rule finds the full run first: read back, not stopped, still failed
-    again = runner(tmp_path, tracking_rate >= 0.9, StoppableFake(calls_file=str(log))).evaluate(20.0)
+    again = runner(tmp_path, tracking_rate >= 0.9, StoppableFake(calls_file=str(log))).run_trial(20.0)
     assert again.cached and not again.passed and "stopped" not in again.runs[0] and calls(log) == 2
 
 
@@ -192,9 +192,9 @@ def test_a_failed_tests_message_says_its_edge_runs_were_stopped(tmp_path: Path) 
 
 def test_the_same_rule_reads_its_stopped_run_back(tmp_path: Path) -> None:
     log = tmp_path / "calls.jsonl"
-    first = runner(tmp_path, tracking_rate >= 0.9, StoppableFake(calls_file=str(log))).evaluate(20.0)
+    first = runner(tmp_path, tracking_rate >= 0.9, StoppableFake(calls_file=str(log))).run_trial(20.0)
     # another requirement with the same tracking criterion: the same rule, the same stopped run
-    second = runner(tmp_path, tracking_rate >= 0.9, StoppableFake(calls_file=str(log))).evaluate(20.0)
+    second = runner(tmp_path, tracking_rate >= 0.9, StoppableFake(calls_file=str(log))).run_trial(20.0)
     assert second.cached and second.runs[0]["stopped"] == first.runs[0]["stopped"] and calls(log) == 1
 
 
@@ -205,21 +205,21 @@ def test_full_run_keys_are_unchanged_and_early_stop_can_be_turned_off(tmp_path: 
     plain = runner(tmp_path, tracking_rate >= 0.9, FakeSlam(calls_file=str(log)))  # cannot stop: never given a rule
     assert on.key(20.0) == off.key(20.0) and off.stop_rule is None and plain.stop_rule is None
     assert on.key(20.0, stop=on.stop_rule) != on.key(20.0)
-    full = off.evaluate(20.0)
+    full = off.run_trial(20.0)
     assert not full.passed and "stopped" not in full.runs[0] and full.metrics["tracking_rate"] == 0.5
     assert off.cache.get(off.key(20.0)) is not None  # type: ignore[union-attr]
-    assert "stopped" not in plain.evaluate(30.0).runs[0]
+    assert "stopped" not in plain.run_trial(30.0).runs[0]
 
 
 def test_without_a_cache_the_rule_still_stops(tmp_path: Path) -> None:
     strict = runner(tmp_path, tracking_rate >= 0.9, StoppableFake())
     strict.cache = None
-    assert strict.evaluate(20.0).runs[0]["stopped"].startswith("tracking_rate >= 0.9 can no longer hold")
+    assert strict.run_trial(20.0).runs[0]["stopped"].startswith("tracking_rate >= 0.9 can no longer hold")
 
 
 def test_records_say_stopped_only_when_stopped(tmp_path: Path) -> None:
     strict = runner(tmp_path, tracking_rate >= 0.9, StoppableFake())
-    assert "stopped" not in strict.evaluate(40.0).runs[0]  # tracks all 8: never stopped
+    assert "stopped" not in strict.run_trial(40.0).runs[0]  # tracks all 8: never stopped
     stored = json.dumps(strict.cache.get(strict.key(40.0)))  # type: ignore[union-attr]
     assert '"stopped"' not in stored
 

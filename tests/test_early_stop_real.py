@@ -50,14 +50,14 @@ def runner(dataset: Sequence, criterion: Criterion, workdir: Path, cache: Conten
 def full_at_2_lux(kitti07: Sequence, tmp_path_factory: pytest.TempPathFactory) -> Trial:
     """The full run at 2 lx, without early stop (its record read back from a cache of its own, as JSON)."""
     folder = tmp_path_factory.mktemp("full")
-    return runner(kitti07, tracking_rate >= 0.9, folder, ContentCache(folder / "cache"), early_stop=False).evaluate(2.0)
+    return runner(kitti07, tracking_rate >= 0.9, folder, ContentCache(folder / "cache"), early_stop=False).run_trial(2.0)
 
 
 def test_a_run_that_loses_track_stops_early_with_the_full_runs_verdict(kitti07: Sequence, full_at_2_lux: Trial, tmp_path: Path) -> None:
     full = full_at_2_lux.runs[0]
     assert "stopped" not in full and not full_at_2_lux.passed and 0.5 < full["tracking_rate"] < 0.9  # 75/140
     cache = ContentCache(tmp_path / "cache")
-    trial = runner(kitti07, tracking_rate >= 0.9, tmp_path / "work", cache).evaluate(2.0)
+    trial = runner(kitti07, tracking_rate >= 0.9, tmp_path / "work", cache).run_trial(2.0)
     run = trial.runs[0]
     found = re.fullmatch(
         r"tracking_rate >= 0.9 can no longer hold: (\d+) of 140 frames not tracked by frame (\d+) \(\S+ at best\)", run["stopped"]
@@ -69,11 +69,11 @@ def test_a_run_that_loses_track_stops_early_with_the_full_runs_verdict(kitti07: 
     assert run["tracking_rate"] <= full["tracking_rate"] and run["failure"] is None  # scored on what it tracked
     # a milder requirement on the same frames does not read the stopped run: it runs to the end
     # and gets exactly the full run's metrics
-    milder = runner(kitti07, tracking_rate >= 0.5, tmp_path / "work", cache).evaluate(2.0)
+    milder = runner(kitti07, tracking_rate >= 0.5, tmp_path / "work", cache).run_trial(2.0)
     assert milder.passed and not milder.cached and "stopped" not in milder.runs[0]
     assert {k: v for k, v in milder.runs[0].items() if k not in RUN_ONLY} == {k: v for k, v in full.items() if k not in RUN_ONLY}
     # and the strict requirement now reads that full run back: not stopped, still failed
-    again = runner(kitti07, tracking_rate >= 0.9, tmp_path / "work", cache).evaluate(2.0)
+    again = runner(kitti07, tracking_rate >= 0.9, tmp_path / "work", cache).run_trial(2.0)
     assert again.cached and not again.passed and "stopped" not in again.runs[0]
 
 

@@ -75,6 +75,6 @@ def test_robustness_boundary_is_searchable(name: str) -> None:
     space = spec.search_space()
     assert space.min <= rb.lower_bound < rb.upper_bound <= space.max
     assert 0 < rb.tolerance < rb.upper_bound - rb.lower_bound
-    assert 6 <= rb.max_iters <= 8
+    assert 6 <= rb.max_trials <= 8
     assert rb.ate_rmse_fail > 0
     assert rb.name

@@ -177,7 +177,7 @@ def test_robustness_boundary_checks(tmp_path: Path) -> None:
     )
     assert "robustness_boundary.upper_bound: 10 must be greater than lower_bound 200" in with_rb(lower_bound=200, upper_bound=10)
     assert "robustness_boundary.tolerance: 0 is not valid" in with_rb(tolerance=0)
-    assert "robustness_boundary.max_iters: 0 is not valid; must be an integer >= 1" in with_rb(max_iters=0)
+    assert "robustness_boundary.max_trials: 0 is not valid; must be an integer >= 1" in with_rb(max_trials=0)
     assert "robustness_boundary.ate_rmse_fail: -1 m is not valid" in with_rb(ate_rmse_fail=-1)
     assert "robustness_boundary.reliability: 1.5 is not valid; must be a probability between 0 and 1 (both excluded)" in with_rb(
         reliability=1.5

@@ -109,11 +109,11 @@ class BoundaryChecks:
             outcome["requirement"]
             == f"ate_rmse < {BOUNDARY['ate_rmse_fail']:g} m and tracking_rate >= 0.5 wherever fog.visibility_m >= {BOUNDARY['upper']} m"
         )
-        limits = (BOUNDARY["lower"], BOUNDARY["upper"], BOUNDARY["tolerance"], BOUNDARY["max_iters"])
-        assert (experiment["lower_bound"], experiment["upper_bound"], experiment["tolerance"], experiment["max_iters"]) == limits
+        limits = (BOUNDARY["lower"], BOUNDARY["upper"], BOUNDARY["tolerance"], BOUNDARY["max_trials"])
+        assert (experiment["lower_bound"], experiment["upper_bound"], experiment["tolerance"], experiment["max_trials"]) == limits
         assert outcome["seed"] == SEED and outcome["dataset"] == "synthetic/urban-seed0"
         assert experiment["linear_sweep_trials"] == linear_sweep_trials(BOUNDARY["lower"], BOUNDARY["upper"], BOUNDARY["tolerance"]) == 101
-        assert len(outcome["trials"]) <= BOUNDARY["max_iters"]
+        assert len(outcome["trials"]) <= BOUNDARY["max_trials"]
 
     def test_each_trial_verdict_is_the_requirement_on_its_metrics(self, searched: Searched) -> None:
         """The mild end passes (clean-looking air), the severe end fails (2 m: nothing tracked)."""
@@ -141,7 +141,7 @@ class BoundaryChecks:
         assert not [t["value"] for t in trials if fail_value < t["value"] < pass_value]  # the tightest bracket
         assert outcome["termination"] in TERMINATIONS
         if pass_value - fail_value > BOUNDARY["tolerance"]:
-            assert outcome["termination"] == "max_trials" and len(trials) == BOUNDARY["max_iters"]
+            assert outcome["termination"] == "max_trials" and len(trials) == BOUNDARY["max_trials"]
 
     def test_prints_a_step_per_trial_and_the_count_against_a_linear_sweep(self, searched: Searched) -> None:
         first, trials = searched.first, searched.outcome["trials"]

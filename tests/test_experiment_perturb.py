@@ -229,8 +229,8 @@ def test_modules_and_search_trials_are_bounded(tmp_path: Path) -> None:
     config["perturbations"].append({"name": "more", "type": "fog"})
     assert "perturbations[3]: brings the modules to 257 (composite steps count one each); the limit is 256" in error_of(tmp_path, config)
     config = base_config(tmp_path)
-    config["robustness_boundary"]["max_iters"] = 10**100
-    assert "robustness_boundary.max_iters: 1" + "0" * 100 + " is not valid; the limit is 100 trials" in error_of(tmp_path, config)
+    config["robustness_boundary"]["max_trials"] = 10**100
+    assert "robustness_boundary.max_trials: 1" + "0" * 100 + " is not valid; the limit is 100 trials" in error_of(tmp_path, config)
 
 
 def test_an_unknown_name_is_quoted_short_and_a_step_lists_only_modules(tmp_path: Path) -> None:

@@ -28,7 +28,7 @@ from sal_adapters.images import read_image
 
 FRAMES = 8
 #: the commands the page suggests for a part not made yet, as it writes them
-SUGGESTED = {"evaluate": "sal evaluate CONFIG --slam NAME", "features": "sal features CONFIG --features orb"}
+SUGGESTED = {"evaluate": "sal evaluate CONFIG --system NAME", "features": "sal features CONFIG --features orb"}
 CONFIG = {
     "experiment": {"name": "report_demo", "seed": 3},
     "dataset": {"type": "synthetic", "max_frames": FRAMES, "options": {"scene": "urban", "frames": FRAMES}},
@@ -53,7 +53,7 @@ CONFIG = {
         "lower_bound": 5,
         "upper_bound": 400,
         "tolerance": 20,
-        "max_iters": 3,
+        "max_trials": 3,
         "ate_rmse_fail": 1.0,
     },
 }

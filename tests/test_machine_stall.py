@@ -65,7 +65,7 @@ def test_a_command_run_stopped_by_the_machine_is_not_cached_and_runs_again(tmp_p
 
     def session() -> dict:
         runner = TrialRunner(tiny, fog.visibility_m.ref(), system, requirement, cache=cache, workdir=tmp_path / "work", timeout=2.0)
-        trial = runner.evaluate(40.0)
+        trial = runner.run_trial(40.0)
         assert not trial.passed  # this session's verdict stands: the run did time out
         return trial.runs[0]
 

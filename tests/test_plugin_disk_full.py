@@ -4,7 +4,7 @@ session still prints its results and its robustness table, exits with the tests'
 one line per output which path could not be written and why, and writes the outputs it can
 (the Markdown report); the next session, with room again, saves its history.
 
-A full disk under the trial cache (issue 23, item 5) costs the cache alone: every test gets
+A full disk under the cache (issue 23, item 5) costs the cache alone: every test gets
 its verdict, one warning names the cache folder and why, and nothing is left in it."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""A read-only trial cache (a shared one mounted read-only) serves what it holds to a
+"""A read-only cache (a shared one mounted read-only) serves what it holds to a
 pytest session: no SLAM run for a cached trial, one warning, nothing written (issue 12)."""
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """The plugin end to end: ``sal.require`` / ``sal.sweep`` / ``sal.at`` tests run by inner
 pytest sessions (``pytester``) on ``FakeSlam``, whose boundaries are exactly predictable, once
 without xdist and once with ``-n 2``: verdicts and boundaries, failure messages, flakiness, the
-trial cache, sweeps, the ``sal`` mark, parametrised systems, JUnit XML, Markdown and HTML
+cache, sweeps, the ``sal`` mark, parametrised systems, JUnit XML, Markdown and HTML
 reports (the real ORB-SLAM3 search through the plugin is in test_plugin_orbslam3.py).
 
 On the default 60-frame urban world ``FakeSlam(tracked="min(1, v / 40)")`` meets
@@ -256,7 +256,7 @@ def test_a_noisy_search_counts_the_runs_of_a_sweep_level_earlier_in_the_session(
     assert calls(pytester) == level_runs + 3
 
 
-# -- 5: the trial cache ----------------------------------------------------------------------
+# -- 5: the cache ----------------------------------------------------------------------
 CACHE_TESTS = """
 
 @sal.require(tracking_rate >= 0.5, fog.visibility_m >= 25, tolerance=1)

@@ -88,7 +88,7 @@ def test_help_lists_the_options_and_a_bad_check_is_a_usage_error(pytester: pytes
     helped.stdout.fnmatch_lines(
         [
             "SLAM robustness (pytest-sal):",
-            "*--sal-cache-dir=DIR*trial cache folder*",
+            "*--sal-cache-dir=DIR*cache folder*",
             "*--sal-no-cache*",
             "*--sal-history-dir=DIR*",
             "*--sal-compare-fail=CHECK*",
@@ -107,7 +107,8 @@ BAD_INI = [
     ("sal_runs", "0", "expected a whole number >= 1 (the most runs per trial), or auto"),
     ("sal_seed", "1.5", "expected a whole number >= 0 (perturbation seed)"),
     ("sal_max_trials", "-2", "expected a whole number >= 1 (trials per boundary search)"),
-    ("sal_tolerance", "x", "expected a number > 0 (percent of the boundary value)"),
+    ("sal_tolerance", "x", 'expected a percent > 0 of the bracket\'s larger end, such as "10%"'),
+    ("sal_tolerance", "0%", 'expected a percent > 0 of the bracket\'s larger end, such as "10%"'),
     ("sal_reliability", "1", "expected a probability between 0 and 1 (the share of runs that must hold)"),
     ("sal_confidence", "0.5", "expected a probability between 0.5 and 1 (one-sided confidence)"),
     ("sal_max_runs", "0", "expected a whole number >= 1 (runs per search of a noisy system)"),

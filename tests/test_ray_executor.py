@@ -145,7 +145,7 @@ def test_slots_count_the_share_of_the_cluster_less_the_runs_in_flight(executor: 
     assert RayExecutor(num_cpus=4, share=2).slots(create("reference_vo")) == 2  # two xdist workers share 4 CPUs
     sleepy = SleepySlam(sleep_s=1.5)
     job = runner(tmp_path, sleepy, executor)
-    running = threading.Thread(target=job.evaluate, args=(30.0,))
+    running = threading.Thread(target=job.run_trial, args=(30.0,))
     running.start()
     deadline = time.monotonic() + 5
     while executor.slots(sleepy) == 2 and time.monotonic() < deadline:
@@ -180,26 +180,26 @@ def test_a_cached_suite_sends_nothing_and_starts_no_ray(searched: Searched, tmp_
 def test_a_worker_killed_once_is_retried_and_its_run_stored(executor: RayExecutor, tmp_path: Path) -> None:
     switch, calls = tmp_path / "switch", tmp_path / "calls.jsonl"
     switch.write_text("kill-once")
-    trial = runner(tmp_path, LostWorkerSlam(str(switch), calls_file=str(calls)), executor).evaluate(40.0)
+    trial = runner(tmp_path, LostWorkerSlam(str(switch), calls_file=str(calls)), executor).run_trial(40.0)
     assert switch.read_text() == "never" and calls.read_text().count('"lost"') == 1  # the first attempt died
     assert trial.passed and trial.metrics["tracking_rate"] == 1.0 and "not_cached" not in trial.runs[0]
-    assert runner(tmp_path, LostWorkerSlam(str(switch)), executor).evaluate(40.0).cached
+    assert runner(tmp_path, LostWorkerSlam(str(switch)), executor).run_trial(40.0).cached
 
 
 def test_a_worker_lost_every_time_fails_with_the_reason_and_leaves_the_cache_sound(executor: RayExecutor, tmp_path: Path) -> None:
     switch, calls = tmp_path / "switch", tmp_path / "calls.jsonl"
     switch.write_text("kill")
     system = LostWorkerSlam(str(switch), calls_file=str(calls))
-    trial = runner(tmp_path, system, executor).evaluate(40.0)
+    trial = runner(tmp_path, system, executor).run_trial(40.0)
     (run,) = trial.runs
     assert run["failure"].startswith("Ray worker lost 3 times: WorkerCrashedError: The worker died unexpectedly")
     assert run["not_cached"] == run["failure"] and not trial.passed and run["tracking_rate"] == 0.0
     assert [json.loads(line) for line in calls.read_text().splitlines()] == [{"lost": "kill"}] * 3  # max_retries=2: 3 attempts
     assert cache_files(tmp_path) == []  # no entry, no temporary or partial file
     switch.write_text("run")  # the machine is fine again: the next session runs it and stores it
-    good = runner(tmp_path, system, executor).evaluate(40.0)
+    good = runner(tmp_path, system, executor).run_trial(40.0)
     assert good.passed and not good.cached and len(cache_files(tmp_path)) == 1
-    assert runner(tmp_path, system, executor).evaluate(40.0).cached
+    assert runner(tmp_path, system, executor).run_trial(40.0).cached
 
 
 def test_a_task_that_never_answers_is_cancelled_and_not_cached(
@@ -209,7 +209,7 @@ def test_a_task_that_never_answers_is_cancelled_and_not_cached(
     monkeypatch.setattr(executor, "max_retries", 0)
     switch = tmp_path / "switch"
     switch.write_text("hang")  # sleeps an hour whatever the timeout
-    trial = runner(tmp_path, LostWorkerSlam(str(switch)), executor, timeout=1.0).evaluate(40.0)
+    trial = runner(tmp_path, LostWorkerSlam(str(switch)), executor, timeout=1.0).run_trial(40.0)
     (run,) = trial.runs
     assert run["failure"] == (
         "no result from the Ray worker within 3 s (1 attempt(s) of timeout 1 s + 0.5 s, and as long again to wait for a worker): cancelled"
@@ -249,7 +249,7 @@ def test_a_dataset_the_worker_cannot_read_is_one_error_naming_the_worker(executo
     trial_runner.key(30.0)  # the controller read it (its fingerprint) before it went away
     shutil.rmtree(folder)
     with pytest.raises(DatasetError) as error:
-        trial_runner.evaluate(30.0)
+        trial_runner.run_trial(30.0)
     assert error.value.path == str(folder) and str(error.value).startswith(f"{folder}: the dataset kitti")
     assert " on Ray node " in str(error.value) and "(127.0.0.1): every worker must see the dataset at the same path" in str(error.value)
 
@@ -259,7 +259,7 @@ def test_a_system_no_node_can_fit_is_a_usage_error(executor: RayExecutor, tmp_pa
     with pytest.raises(
         ExecutorError, match=r"droid_slam asks for CPU 1, GPU 1 per run, but no node of the Ray cluster at 127\.0\.0\.1:\d+ has"
     ):
-        runner(tmp_path, droid, executor).evaluate(40.0)
+        runner(tmp_path, droid, executor).run_trial(40.0)
 
 
 def test_another_process_submits_to_the_same_ray_by_its_address(executor: RayExecutor, tmp_path: Path) -> None:

@@ -50,15 +50,15 @@ def trial_runner(dataset: Sequence, tmp_path: Path, executor: Executor) -> Trial
 def test_a_lost_run_fails_with_its_reason_and_is_never_cached(tmp_path: Path) -> None:
     dataset = open_dataset("synthetic", scene="indoor", frames=6, sensor="rgbd")
     runner = trial_runner(dataset, tmp_path, WorkerLost())
-    trial = runner.evaluate(40.0)
+    trial = runner.run_trial(40.0)
     (run,) = trial.runs
     assert not trial.passed and run["failure"] == LOST and run["not_cached"] == LOST
     assert run["tracking_rate"] == 0.0 and run["ate_rmse"] is None and not run["cached"]
     assert all(name in run for name in TRIAL_METRICS)
     assert ContentCache(tmp_path / "cache").get(runner.key(40.0)) is None
-    again = trial_runner(dataset, tmp_path, LocalExecutor()).evaluate(40.0)  # the next session runs it
+    again = trial_runner(dataset, tmp_path, LocalExecutor()).run_trial(40.0)  # the next session runs it
     assert again.passed and not again.cached
-    assert trial_runner(dataset, tmp_path, WorkerLost()).evaluate(40.0).cached
+    assert trial_runner(dataset, tmp_path, WorkerLost()).run_trial(40.0).cached
 
 
 def test_the_failed_record_is_a_complete_run_record(tmp_path: Path) -> None:
@@ -90,7 +90,7 @@ def test_a_dataset_the_worker_cannot_read_names_the_path_and_the_worker(shared_d
     runner.key(30.0)  # the controller read the dataset (its fingerprint) before it went away
     shutil.rmtree(folder)
     with pytest.raises(DatasetError) as error:
-        runner.evaluate(30.0)
+        runner.run_trial(30.0)
     assert error.value.path == str(folder)
     assert f"not readable on worker {socket.gethostname()}:" in str(error.value)
     assert "every worker must see the dataset at the same path as the controller" in str(error.value)
@@ -103,7 +103,7 @@ def test_a_missing_frame_file_is_named_too(shared_data: Path, tmp_path: Path) ->
     runner.key(30.0)
     (folder / "image_0" / "000002.png").unlink()  # the last frame
     with pytest.raises(DatasetError, match="000002.png: the dataset .* is not readable on worker"):
-        runner.evaluate(30.0)
+        runner.run_trial(30.0)
 
 
 def test_a_rendered_sequence_reads_no_files_and_is_not_checked(tmp_path: Path) -> None:

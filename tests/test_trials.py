@@ -38,13 +38,13 @@ def test_median_over_runs_and_a_metric_missing_in_most_runs_is_missing() -> None
 
 def test_a_trial_is_judged_and_read_back_from_the_cache(tmp_path: Path) -> None:
     calls = tmp_path / "calls.jsonl"
-    first = runner(tmp_path, FakeSlam(calls_file=str(calls))).evaluate(20.0)
+    first = runner(tmp_path, FakeSlam(calls_file=str(calls))).run_trial(20.0)
     assert first.metrics["tracking_rate"] == 0.5 and first.passed and not first.cached  # round(8 * 20/40) = 4 of 8
     assert len(first.runs) == 1  # a deterministic system: one run a trial
-    again = runner(tmp_path, FakeSlam(calls_file=str(calls))).evaluate(20.0)
+    again = runner(tmp_path, FakeSlam(calls_file=str(calls))).run_trial(20.0)
     assert again.cached and again.metrics == first.metrics
     assert len(calls.read_text().splitlines()) == 1  # one SLAM run for both
-    other = runner(tmp_path, FakeSlam(tracked="min(1, v / 80)", calls_file=str(calls))).evaluate(20.0)
+    other = runner(tmp_path, FakeSlam(tracked="min(1, v / 80)", calls_file=str(calls))).run_trial(20.0)
     assert not other.cached and not other.passed  # another system is another trial
 
 
@@ -65,7 +65,7 @@ def test_perturbed_frames_are_cached_once_and_read_back_identical(tmp_path: Path
 def test_cache_frames_gives_systems_the_stored_copy(tmp_path: Path) -> None:
     calls = tmp_path / "calls.jsonl"
     for tracked in ("min(1, v / 40)", "min(1, v / 80)"):  # two systems, one perturbed copy
-        trial = runner(tmp_path, FakeSlam(tracked=tracked, calls_file=str(calls)), cache_frames=True).evaluate(30.0)
+        trial = runner(tmp_path, FakeSlam(tracked=tracked, calls_file=str(calls)), cache_frames=True).run_trial(30.0)
         assert not trial.cached
     assert [json.loads(line)["value"] for line in calls.read_text().splitlines()] == [30.0, 30.0]
     assert ContentCache(tmp_path / "cache").stats()["folders"] == 1
@@ -136,7 +136,7 @@ def test_an_edge_that_leaves_the_dataset_unchanged_is_refused_before_any_run(tmp
 def test_the_kitti_segments_key_the_run_and_score_t_rel(tmp_path: Path) -> None:
     short = runner(tmp_path, FakeSlam(), kitti_segments=(0.02,))
     assert short.key(40.0) != runner(tmp_path, FakeSlam()).key(40.0)  # another scoring is another run record
-    trial = short.evaluate(40.0)  # every frame tracked, poses from the ground truth
+    trial = short.run_trial(40.0)  # every frame tracked, poses from the ground truth
     assert trial.metrics["t_rel"] < 1e-6 and trial.metrics["r_rel"] < 1e-6 and trial.metrics["kitti_missing"] is None
-    default = runner(tmp_path, FakeSlam()).evaluate(40.0)
+    default = runner(tmp_path, FakeSlam()).run_trial(40.0)
     assert default.metrics["t_rel"] is None and "too short for a segment of 100 m" in default.metrics["kitti_missing"]

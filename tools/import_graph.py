@@ -38,7 +38,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("sal_adapters",),  # datasets, sequences, trajectories, shared errors and file helpers
     ("sal_modules", "sal_wrappers"),  # perturbations; SLAM systems
     ("pytest_sal.analysis",),  # pure algorithms: metrics, KITTI metrics, feature tracking, plots
-    ("pytest_sal.store",),  # the content-addressed trial cache and its keys
+    ("pytest_sal.store",),  # the content-addressed cache of runs and its keys
     ("pytest_sal.engine",),  # requirements, boundary search, trials, outcomes
     ("pytest_sal.history",),  # run history, regression checks, the gate
     ("pytest_sal.experiment",),  # YAML experiments as library functions

@@ -74,12 +74,20 @@ def parse_key_values(pairs: list[str], what: str = "--option") -> dict[str, Any]
 
 
 def add_slam_arguments(command: argparse.ArgumentParser, runs_help: str, default_runs: int | None = 1) -> None:
-    """``--slam NAME``, ``--slam-option KEY=VALUE`` (repeatable), ``--runs N``, ``--timeout S``."""
+    """``--system NAME``, ``--system-option KEY=VALUE`` (repeatable), ``--runs N``, ``--timeout S``;
+    ``--slam`` and ``--slam-option``, their first names, are still taken."""
     command.add_argument(
-        "--slam", required=True, metavar="NAME", help="registered SLAM system (entry-point group sal.systems), e.g. reference_vo, orbslam3"
+        "--system",
+        "--slam",
+        dest="slam",
+        required=True,
+        metavar="NAME",
+        help="registered SLAM system (entry-point group sal.systems), e.g. reference_vo, orbslam3",
     )
     command.add_argument(
+        "--system-option",
         "--slam-option",
+        dest="slam_option",
         action="append",
         default=[],
         metavar="KEY=VALUE",

@@ -1,4 +1,4 @@
-"""``sal boundary CONFIG --slam NAME``: the failure boundary of the config's
+"""``sal boundary CONFIG --system NAME``: the failure boundary of the config's
 ``robustness_boundary`` block (``pytest_sal.experiment.boundary``), with one line per trial as
 it ends (``step N`` and ``pytest_sal.report.formatting.trial_line``) and the boundary found
 against the trials a linear sweep would need."""
@@ -30,15 +30,17 @@ __all__ = ["add_boundary_commands"]
 
 EPILOG = """\
 examples:
-  sal boundary example_suites/configs/fog_rain_urban.yaml --slam reference_vo
-  sal boundary exp.yaml --slam orbslam3 --slam-option features=2000 --runs 3 --cache-dir /tmp/sal-cache
-  sal boundary exp.yaml --slam orbslam3 --executor ray --ray-address auto   # runs as Ray tasks, several at once
+  sal boundary example_suites/configs/fog_rain_urban.yaml --system reference_vo
+  sal boundary exp.yaml --system orbslam3 --system-option features=2000 --runs 3 --cache-dir /tmp/sal-cache
+  sal boundary exp.yaml --system orbslam3 --executor ray --ray-address auto   # runs as Ray tasks, several at once
 
 The config needs an enabled robustness_boundary block (target_perturbation, parameter,
-lower_bound, upper_bound, tolerance, max_iters, ate_rmse_fail, fail_on_tracking_failure).
+lower_bound, upper_bound, tolerance, max_trials, ate_rmse_fail, fail_on_tracking_failure;
+max_iters, the old name of max_trials, is read with a deprecation warning). tolerance is a
+number in the parameter's unit or a percent of the bracket's larger end, such as "10%".
 A trial passes when ate_rmse < ate_rmse_fail and, with fail_on_tracking_failure (the default),
 tracking_rate >= 0.5. The search starts at the mild end of the range and bisects the failure
-point down to tolerance (or max_iters trials).
+point down to tolerance (or max_trials trials).
 
 Writes <base_dir>/<name>/robustness_boundary/<slam>/<boundary name>/boundary_summary.json
 (the search's outcome: pass and fail value, every trial with its runs, metrics and verdict,
@@ -62,7 +64,7 @@ def add_boundary_commands(commands: argparse._SubParsersAction) -> None:
     add_slam_arguments(
         cmd, "the most runs per trial; above 1 the system is searched as a noisy one (its chance to hold)", default_runs=None
     )
-    add_cache_arguments(cmd, "trial cache", no_cache="run every trial, read and store nothing in the cache")
+    add_cache_arguments(cmd, "cache of runs", no_cache="run every trial, read and store nothing in the cache")
     add_executor_arguments(cmd)
     cmd.set_defaults(run=_run)
 
@@ -72,7 +74,7 @@ def _run(args: argparse.Namespace) -> int:
 
     config = load_config(args.config)
     enabled_boundary(config)  # a missing or disabled block fails before the system is made
-    system = _create_system(args.slam, parse_key_values(args.slam_option, "--slam-option"))  # an unknown system fails before any work
+    system = _create_system(args.slam, parse_key_values(args.slam_option, "--system-option"))  # an unknown system fails before any work
     search = prepare_boundary_search(
         config, system, runs=args.runs, timeout=args.timeout, cache_dir=args.cache_dir, use_cache=not args.no_cache
     )
@@ -89,7 +91,7 @@ def _create_system(name: str, options: dict[str, Any]) -> SlamSystem:
     try:
         return create(name, **options)
     except TypeError as exc:  # an option the system's constructor does not take
-        raise SalError(f"--slam-option: SLAM system {name!r} rejects the options {', '.join(options) or '(none)'}: {exc}") from None
+        raise SalError(f"--system-option: SLAM system {name!r} rejects the options {', '.join(options) or '(none)'}: {exc}") from None
 
 
 def _unit_text(search: BoundarySearch) -> str:
@@ -102,7 +104,7 @@ def _print_setup(search: BoundarySearch) -> None:
     unit = _unit_text(search)
     print(
         f"boundary    {rb.name}: {ref.label} in {rb.lower_bound:g} .. {rb.upper_bound:g}{unit} (gets worse {ref.param.worse}), "
-        f"tolerance {rb.tolerance:g}{unit}, max_iters {rb.max_iters}"
+        f"tolerance {rb.tolerance_text(search.ref.unit)}, max_trials {rb.max_trials}"
     )
     print(f"system      {system.name} {json.dumps(system.options(), sort_keys=True)}, up to {search.max_runs} run(s) per trial")
     print(f"dataset     {search.config.dataset.type} {clean.name}: {len(clean)} frames, {clean.sensor}")
@@ -132,6 +134,6 @@ def _print_result(search: BoundarySearch, result: BoundaryResult) -> None:
     print(
         f"boundary    {search.ref.label} {outcome.boundary.text()} ({outcome.termination}); "
         f"{len(outcome.trials)} trials, {outcome.runs} runs ({outcome.cached_trials} trials cached) vs {search.sweep_trials} "
-        f"for a linear sweep at {search.block.tolerance:g}{_unit_text(search)} steps; {outcome.confidence()}"
+        f"for a linear sweep at {search.block.tolerance_step:g}{_unit_text(search)} steps; {outcome.confidence()}"
     )
     print(f"wrote {result.summary_path}" + (f"\nwrote {result.plot_path}" if result.plot_path is not None else ""))

@@ -1,4 +1,4 @@
-"""``sal cache info`` and ``sal cache clear``: look at or empty the trial cache."""
+"""``sal cache info`` and ``sal cache clear``: look at or empty the cache."""
 
 from __future__ import annotations
 
@@ -14,12 +14,12 @@ CACHE_EPILOG = """\
 examples:
   sal cache info                          entries and size of ./.sal/cache
   sal cache info --cache-dir /tmp/sal --json
-  sal cache clear                         remove every cached trial result and perturbed sequence
+  sal cache clear                         remove every stored run and perturbed sequence
   sal cache clear --cache-dir ~/proj/.sal/cache
 
-The cache holds trial results (JSON) and perturbed sequences (folders), keyed by the dataset
-fingerprint, the module and its parameters, the seed, the system and its options and the number
-of runs, so an identical trial never runs SLAM twice. pytest uses <rootdir>/.sal/cache unless
+The cache holds one entry per SLAM run (JSON: its metrics and verdict) and per stored perturbed
+sequence (a folder), keyed by the dataset fingerprint, the perturbation and its parameters, the
+seed, the system and its options and the run's number, so an identical run never runs SLAM twice. pytest uses <rootdir>/.sal/cache unless
 given --sal-cache-dir; a cache folder is safe to delete at any time.
 """
 
@@ -28,15 +28,15 @@ def add_cache_commands(commands: argparse._SubParsersAction) -> None:
     """Add ``cache info`` and ``cache clear`` to the ``sal`` subcommands."""
     cache = commands.add_parser(
         "cache",
-        help="show or clear the cache of trial results and perturbed sequences",
-        description="Trial cache tools.",
+        help="show or clear the cache of runs and perturbed sequences",
+        description="Look at or empty the cache: one entry per stored run (and per stored perturbed sequence).",
         epilog=CACHE_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     actions = cache.add_subparsers(dest="cache_command", metavar="ACTION", required=True)
     info = actions.add_parser(
         "info",
-        help="entries (trial results, sequences) and total size of the cache",
+        help="entries (stored runs, sequences) and total size of the cache",
         description="Print the cache folder, its number of entries and their total size.",
         epilog="example: sal cache info --cache-dir .sal/cache --json",
     )
@@ -44,7 +44,7 @@ def add_cache_commands(commands: argparse._SubParsersAction) -> None:
     clear = actions.add_parser(
         "clear",
         help="remove every entry of the cache",
-        description="Remove every cached trial result and perturbed sequence. Entries that a "
+        description="Remove every stored run and perturbed sequence. Entries that a "
         "running test session is computing right now are left alone; files in the folder that "
         "are not cache entries are never touched.",
         epilog="example: sal cache clear --cache-dir ~/proj/.sal/cache",
@@ -78,7 +78,7 @@ def _run_info(args: argparse.Namespace) -> int:
         print(json.dumps({key: stats[key] for key in ("root", "entries", "results", "folders", "bytes")}, indent=2))
         return 0
     print(stats["root"] + ("" if cache.root.is_dir() else "  (does not exist yet)"))
-    print(f"  entries  {stats['entries']} ({stats['results']} trial results, {stats['folders']} sequences)")
+    print(f"  entries  {stats['entries']} ({stats['results']} runs, {stats['folders']} sequences)")
     print(f"  size     {format_bytes(stats['bytes'])}")
     return 0
 

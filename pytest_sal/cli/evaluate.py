@@ -1,4 +1,4 @@
-"""``sal evaluate CONFIG --slam NAME [--runs N]``: run a SLAM system on the clean sequence and on
+"""``sal evaluate CONFIG --system NAME [--runs N]``: run a SLAM system on the clean sequence and on
 each enabled perturbation of an experiment config, score every run against the ground truth and
 write the paper's result tree (``pytest_sal.experiment.evaluate``), with one line per run as it is
 scored and a table of the medians over runs."""
@@ -19,9 +19,9 @@ __all__ = ["add_evaluate_commands"]
 
 EPILOG = """\
 examples:
-  sal evaluate example_suites/configs/indoor_camera.yaml --slam reference_vo
-  sal evaluate exp.yaml --slam orbslam3 --slam-option features=2000 --runs 3 --timeout 900
-  sal evaluate exp.yaml --slam reference_vo --cache-dir /tmp/sal-cache   # frames sal perturb wrote there
+  sal evaluate example_suites/configs/indoor_camera.yaml --system reference_vo
+  sal evaluate exp.yaml --system orbslam3 --system-option features=2000 --runs 3 --timeout 900
+  sal evaluate exp.yaml --system reference_vo --cache-dir /tmp/sal-cache   # frames sal perturb wrote there
 
 Writes <base_dir>/<name>/slam_results/<SLAM>/: trajectories/run_<k>/{baseline,<perturbation>}.txt,
 metrics/run_<k>/<perturbation>/{ate,vs_baseline}.json, metrics/summary.json (median, mean, std,
@@ -55,7 +55,7 @@ def _run(args: argparse.Namespace) -> int:
 
     if not args.timeout > 0:
         raise SalError(f"--timeout must be positive, got {args.timeout:g}")
-    options = parse_key_values(args.slam_option, "--slam-option")
+    options = parse_key_values(args.slam_option, "--system-option")
     config = load_config(args.config)
     system = create(args.slam, **options)  # unknown name: SalError listing the known systems
     with executor_from_args(args) as executor:

@@ -44,8 +44,8 @@ examples:
 the paper's workflow, one YAML experiment (example_suites/configs/ has the table of severities):
   sal perturb  example_suites/configs/urban_rain.yaml --dry-run   validate, print the plan
   sal perturb  example_suites/configs/urban_rain.yaml             perturbed sequences on disk
-  sal evaluate example_suites/configs/urban_rain.yaml --slam orbslam3 --runs 3
-  sal boundary example_suites/configs/urban_rain.yaml --slam reference_vo
+  sal evaluate example_suites/configs/urban_rain.yaml --system orbslam3 --runs 3
+  sal boundary example_suites/configs/urban_rain.yaml --system reference_vo
   sal features example_suites/configs/urban_rain.yaml --features orb
   sal report   example_suites/configs/urban_rain.yaml             one HTML page of all of it
 

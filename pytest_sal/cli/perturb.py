@@ -1,6 +1,6 @@
 """``sal perturb CONFIG``: validate an experiment config, print the plan, then write each enabled
 perturbation's sequence in the dataset's own layout under ``<base_dir>/<name>/images/<perturbation>/``
-(``pytest_sal.experiment.perturb``), through the trial cache, with progress bars and a timing table."""
+(``pytest_sal.experiment.perturb``), through the cache, with progress bars and a timing table."""
 
 from __future__ import annotations
 
@@ -63,7 +63,7 @@ def _print_plan(plan: PerturbPlan) -> None:
         unit = f" {scale.unit}" if scale.unit else ""
         print(
             f"boundary    {rb.name} ({state}): {rb.target_perturbation}.{rb.parameter} in {rb.lower_bound:g} .. {rb.upper_bound:g}{unit}, "
-            f"tolerance {rb.tolerance:g}, max_iters {rb.max_iters}, ate_rmse_fail {rb.ate_rmse_fail:g} m"
+            f"tolerance {rb.tolerance_text(scale.unit)}, max_trials {rb.max_trials}, ate_rmse_fail {rb.ate_rmse_fail:g} m"
         )
 
 

@@ -20,6 +20,7 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from pytest_sal.engine.tolerance import parse_tolerance
 from sal_adapters.common.errors import SalError
 from sal_modules.params import Bound, ParamRef
 
@@ -142,7 +143,7 @@ class Requirement:
     Attributes:
         criteria: pass criteria (all must hold).
         envelope: the parameter bound searched, or ``None`` (``sal.sweep`` / ``sal.at`` only).
-        options: ``tolerance``, ``max_trials``, ``runs``, ``search_range``, ``seed``,
+        options: ``tolerance`` (``pytest_sal.engine.tolerance``), ``max_trials``, ``runs``, ``search_range``, ``seed``,
             ``reliability``, ``confidence``, ``max_runs`` as given.
     """
 
@@ -259,8 +260,11 @@ def _check_options(options: Mapping[str, Any], envelope: Bound | None) -> None:
         ):
             raise InvalidRequirement(f"sal.require(): {name} must be a probability between {lowest:g} and 1 (both excluded), got {value!r}")
     tolerance = options.get("tolerance")
-    if tolerance is not None and (not isinstance(tolerance, numbers.Real) or not math.isfinite(tolerance) or tolerance <= 0):
-        raise InvalidRequirement(f"sal.require(): tolerance must be a number > 0 in the parameter's unit, got {tolerance!r}")
+    if tolerance is not None:
+        try:
+            parse_tolerance(tolerance)
+        except ValueError as exc:
+            raise InvalidRequirement(f"sal.require(): tolerance {exc}, got {tolerance!r}") from None
     search_range = options.get("search_range")
     if search_range is not None:
         if envelope is None:
@@ -280,9 +284,10 @@ class SearchSettings:
     ``sal_reliability``, ``sal_confidence``, ``sal_max_runs``).
 
     Attributes:
-        tolerance_pct: default tolerance: the search stops when the bracket's width is at most
-            this percent of its larger end (20-22 m at 10 %), which suits linear parameters and
-            ones searched over decades (0.08-0.09 Mbit/s) alike.
+        tolerance_pct: default tolerance, in percent (ini ``sal_tolerance = 10%``): the search
+            stops when the bracket's width is at most this percent of its larger end (20-22 m
+            at 10 %), which suits linear parameters and ones searched over decades
+            (0.08-0.09 Mbit/s) alike (``pytest_sal.engine.tolerance``).
         max_trials: default trial budget (a deterministic system's bisection).
         reliability, confidence: a noisy system meets its requirement at the edge when
             ``p(edge) >= reliability`` with this one-sided confidence.

@@ -11,7 +11,7 @@ The block names a perturbation, one of its searchable parameters and a range
 The envelope's edge is the *mild* end of the range (``upper_bound`` for a parameter that gets
 worse when lower, such as ``fog.visibility_m``; ``lower_bound`` otherwise), so the first trial
 decides whether the system passes there at all; the search then brackets the failure point
-towards the severe end and bisects it down to ``tolerance`` or ``max_iters`` trials. Trials are
+towards the severe end and bisects it down to ``tolerance`` or ``max_trials`` trials. Trials are
 kept in the content cache, so searching again costs no SLAM run.
 
 ``prepare_boundary_search`` sets a search up (nothing runs); ``run_boundary_search`` runs it
@@ -121,7 +121,7 @@ class BoundarySearch:
     @property
     def sweep_trials(self) -> int:
         """Trials a linear sweep of the range at the tolerance step would need."""
-        return linear_sweep_trials(self.block.lower_bound, self.block.upper_bound, self.block.tolerance)
+        return linear_sweep_trials(self.block.lower_bound, self.block.upper_bound, self.block.tolerance_step)
 
 
 @dataclass(frozen=True)
@@ -162,7 +162,7 @@ def prepare_boundary_search(
     requirement = Requirement.build(
         [*criteria, envelope],
         tolerance=rb.tolerance,
-        max_trials=rb.max_iters,
+        max_trials=rb.max_trials,
         search_range=(rb.lower_bound, rb.upper_bound),
         reliability=rb.reliability,
         confidence=rb.confidence,
@@ -230,7 +230,7 @@ def _summary(search: BoundarySearch, outcome: Outcome, plot_path: Path | None) -
         "lower_bound": rb.lower_bound,
         "upper_bound": rb.upper_bound,
         "tolerance": rb.tolerance,
-        "max_iters": rb.max_iters,
+        "max_trials": rb.max_trials,
         "reliability": rb.reliability,
         "confidence": rb.confidence,
         "max_runs": rb.max_runs,

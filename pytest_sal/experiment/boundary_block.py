@@ -1,16 +1,21 @@
 """The ``robustness_boundary`` block of an experiment config, checked: its target is a
 perturbation of the config (not the clean sequence), its parameter a searchable parameter of
 that perturbation (a composite's by its address, ``fog.visibility_m``), its bounds inside the
-parameter's search range and in order, ``tolerance`` and ``ate_rmse_fail`` positive, and a noisy
+parameter's search range and in order, ``tolerance`` a number > 0 in the parameter's unit or a
+percent ``"N%"`` (``pytest_sal.engine.tolerance``), ``max_trials`` a trial budget (``max_iters``,
+its old name, read with a ``SalDeprecationWarning``), ``ate_rmse_fail`` positive, and a noisy
 system's ``reliability`` and ``confidence`` probabilities and ``max_runs`` a run budget."""
 
 from __future__ import annotations
 
+import warnings
 from typing import TYPE_CHECKING, Any
 
+from pytest_sal.engine.tolerance import parse_tolerance
 from pytest_sal.experiment.schema import BOUNDARY_KEYS, BoundaryConfig, PerturbationConfig, build_module
 from pytest_sal.experiment.value_checks import ValueChecks, is_number
 from sal_adapters.common.bounded_yaml import quote
+from sal_adapters.common.errors import SalDeprecationWarning
 from sal_adapters.common.suggest import suggestion
 from sal_modules.errors import ParameterError
 
@@ -40,10 +45,7 @@ def read_boundary(checks: ValueChecks, value: Any, perturbations: tuple[Perturba
             f"{quote(declared)} does not match the module of {quote(parameter)} in {quote(target.name)}, which is {owner!r}",
         )
     lower, upper = _bounds(checks, d, parameter, spec)
-    unit = f" {spec.search_space().unit}" if spec.search_space().unit else ""
-    tolerance = checks.typed(d.get("tolerance", 0.05), f"{BLOCK}.tolerance", "number")
-    if not 0 < tolerance < float("inf"):  # NaN and inf are refused here, naming this key
-        raise checks.error(f"{BLOCK}.tolerance", f"{tolerance:g} is not valid; must be a number > 0{unit}")
+    tolerance = _tolerance(checks, d.get("tolerance", BoundaryConfig.tolerance), spec.search_space().unit)
     fail = checks.typed(d.get("ate_rmse_fail", 1.5), f"{BLOCK}.ate_rmse_fail", "number")
     if not 0 < fail < float("inf"):
         raise checks.error(f"{BLOCK}.ate_rmse_fail", f"{fail:g} m is not valid; must be a number > 0 m")
@@ -63,12 +65,45 @@ def read_boundary(checks: ValueChecks, value: Any, perturbations: tuple[Perturba
         name=checks.safe_name(name, f"{BLOCK}.name"),
         module=owner,
         tolerance=tolerance,
-        max_iters=checks.search_trials(d.get("max_iters", 8), f"{BLOCK}.max_iters"),
+        max_trials=_trial_budget(checks, d),
         ate_rmse_fail=fail,
         fail_on_tracking_failure=checks.typed(d.get("fail_on_tracking_failure", True), f"{BLOCK}.fail_on_tracking_failure", "bool"),
         max_runs=checks.search_runs(d.get("max_runs", BoundaryConfig.max_runs), f"{BLOCK}.max_runs"),
         **probabilities,
     )
+
+
+def _tolerance(checks: ValueChecks, value: Any, unit: str) -> float | str:
+    """``tolerance``: a number > 0 in the parameter's unit, or a percent ``"N%"`` of the
+    bracket's larger end (kept as ``"N%"``), as ``sal.require(tolerance=)`` takes it."""
+    if isinstance(value, str):
+        try:
+            return f"{parse_tolerance(value).percent:g}%"
+        except ValueError as exc:
+            raise checks.error(f"{BLOCK}.tolerance", f"{quote(value)} is not valid; {exc}") from None
+    tolerance = checks.typed(value, f"{BLOCK}.tolerance", "number")
+    if not 0 < tolerance < float("inf"):  # NaN and inf are refused here, naming this key
+        raise checks.error(
+            f"{BLOCK}.tolerance", f'{tolerance:g} is not valid; must be a number > 0{f" {unit}" if unit else ""} or a percent such as "10%"'
+        )
+    return tolerance
+
+
+def _trial_budget(checks: ValueChecks, d: dict[str, Any]) -> int:
+    """``max_trials``, the trials of the search (as ``sal.require(max_trials=)`` and ini
+    ``sal_max_trials``); its old name ``max_iters`` is read with a ``SalDeprecationWarning``."""
+    if "max_iters" not in d:
+        return checks.search_trials(d.get("max_trials", BoundaryConfig.max_trials), f"{BLOCK}.max_trials")
+    if "max_trials" in d:
+        raise checks.error(f"{BLOCK}.max_iters", "is the old name of max_trials; give max_trials only")
+    warnings.warn(
+        SalDeprecationWarning(
+            f"{checks.source}: {BLOCK}.max_iters is the old name of {BLOCK}.max_trials (the trial budget, as in "
+            "sal.require(max_trials=) and ini sal_max_trials); it is read as max_trials: rename the key"
+        ),
+        stacklevel=2,
+    )
+    return checks.search_trials(d["max_iters"], f"{BLOCK}.max_iters")
 
 
 def _target(checks: ValueChecks, value: Any, perturbations: tuple[PerturbationConfig, ...]) -> PerturbationConfig:

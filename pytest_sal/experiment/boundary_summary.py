@@ -4,12 +4,13 @@ knows::
 
     {"outcome": {...Outcome.to_dict()...},
      "experiment": {"config", "name", "boundary", "target_perturbation", "module",
-                    "lower_bound", "upper_bound", "tolerance", "max_iters", "reliability",
+                    "lower_bound", "upper_bound", "tolerance", "max_trials", "reliability",
                     "confidence", "max_runs", "linear_sweep_trials", "plot"}}
 
 ``read_boundary_summary`` reads it back; a summary of the flat form written before (one
 object with ``pass_value``, ``edge_verdict``, trials with a ``verdict`` and a count of
-``runs``) is upgraded first (``upgrade_boundary_summary``).
+``runs``) is upgraded first (``upgrade_boundary_summary``); ``max_iters``, the old name of
+``max_trials``, is read as it.
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ EXPERIMENT_KEYS = (
     "lower_bound",
     "upper_bound",
     "tolerance",
-    "max_iters",
+    "max_trials",
     "reliability",
     "confidence",
     "max_runs",
@@ -69,7 +70,15 @@ def read_boundary_summary(data: Any) -> BoundarySummary:
         outcome = Outcome.from_dict(data["outcome"])
     except (TypeError, KeyError, AttributeError) as exc:  # a field missing, unknown or of the wrong kind
         raise ValueError(f"its outcome cannot be read: {type(exc).__name__}: {exc}") from None
-    return BoundarySummary(outcome, {key: data["experiment"].get(key) for key in EXPERIMENT_KEYS})
+    return BoundarySummary(outcome, _experiment_block(data["experiment"]))
+
+
+def _experiment_block(block: dict[str, Any]) -> dict[str, Any]:
+    """The ``EXPERIMENT_KEYS`` of ``block`` (a summary written before: ``max_trials`` under its
+    old name ``max_iters``)."""
+    if "max_trials" not in block and "max_iters" in block:
+        block = {**block, "max_trials": block["max_iters"]}
+    return {key: block.get(key) for key in EXPERIMENT_KEYS}
 
 
 #: ``Trial.votes()`` as the flat form stored it: ``2 of 3 runs failed (1 starved by the machine, not counted)``
@@ -91,7 +100,7 @@ def upgrade_boundary_summary(old: dict[str, Any]) -> dict[str, Any]:
     for key in ("contradictions", "system_options", "dataset_fingerprint", "seed"):
         if key in old:
             outcome[key] = old[key]
-    experiment = {key: old.get(key) for key in EXPERIMENT_KEYS if key not in ("config", "name")}
+    experiment = {key: value for key, value in _experiment_block(old).items() if key not in ("config", "name")}
     return {"outcome": outcome, "experiment": {"config": None, "name": old.get("experiment"), **experiment}}
 
 

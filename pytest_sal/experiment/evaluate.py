@@ -2,7 +2,7 @@
 enabled perturbation of an experiment config, N runs, every run scored against the ground truth,
 and the paper's result tree written.
 
-Under ``<output_dir>/slam_results/<algo>/``::
+Under ``<output_dir>/slam_results/<system>/``::
 
     trajectories/run_<k>/baseline.txt, <perturbation>.txt           TUM, the scored trajectory
     metrics/run_<k>/<name>/ate.json                                  RunMetrics + alignment used

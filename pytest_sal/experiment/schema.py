@@ -98,9 +98,11 @@ class OutputConfig:
 
 @dataclass(frozen=True)
 class BoundaryConfig:
-    """The ``robustness_boundary`` block: bounds and ``tolerance`` in the parameter's unit,
-    ``ate_rmse_fail`` in m; ``module`` is the module owning ``parameter`` in the target; a noisy
-    system's ``reliability``, ``confidence`` and run budget ``max_runs`` (as ``sal.require``'s)."""
+    """The ``robustness_boundary`` block: bounds in the parameter's unit, ``tolerance`` a number
+    in that unit or a percent ``"N%"`` of the bracket's larger end (``pytest_sal.engine.tolerance``),
+    the trial budget ``max_trials`` (YAML ``max_iters`` is its old name), ``ate_rmse_fail`` in m;
+    ``module`` is the module owning ``parameter`` in the target; a noisy system's
+    ``reliability``, ``confidence`` and run budget ``max_runs`` (as ``sal.require``'s)."""
 
     target_perturbation: str
     parameter: str
@@ -109,13 +111,26 @@ class BoundaryConfig:
     enabled: bool = False
     name: str = ""
     module: str = ""
-    tolerance: float = 0.05
-    max_iters: int = 8
+    tolerance: float | str = 0.05
+    max_trials: int = 8
     ate_rmse_fail: float = 1.5
     fail_on_tracking_failure: bool = True
     reliability: float = 0.8
     confidence: float = 0.9
     max_runs: int = 30
+
+    @property
+    def tolerance_step(self) -> float:
+        """The widest bracket ``tolerance`` allows in ``lower_bound .. upper_bound`` (the unit)."""
+        from pytest_sal.engine.tolerance import parse_tolerance
+
+        return parse_tolerance(self.tolerance).step(self.lower_bound, self.upper_bound)
+
+    def tolerance_text(self, unit: str = "") -> str:
+        """``5 m`` or ``10% of the bracket's larger end``."""
+        from pytest_sal.engine.tolerance import parse_tolerance
+
+        return parse_tolerance(self.tolerance).text(unit)
 
 
 @dataclass(frozen=True)
@@ -174,7 +189,8 @@ BOUNDARY_KEYS = (
     "lower_bound",
     "upper_bound",
     "tolerance",
-    "max_iters",
+    "max_trials",
+    "max_iters",  # the old name of max_trials, read with a SalDeprecationWarning
     "ate_rmse_fail",
     "fail_on_tracking_failure",
     "reliability",

@@ -35,7 +35,7 @@ def slam_section(experiment: ExperimentFolder) -> str:
     heading = "<h2>SLAM results</h2>"
     systems = sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith(".")) if root.is_dir() else []
     if not systems:
-        return f"<section>{heading}<p class='dim'>no SLAM runs: run <code>sal evaluate CONFIG --slam NAME</code></p></section>"
+        return f"<section>{heading}<p class='dim'>no SLAM runs: run <code>sal evaluate CONFIG --system NAME</code></p></section>"
     parts = [heading]
     for system in systems:
         parts.append(f"<h3>{esc(system.name)}</h3>")
@@ -112,7 +112,7 @@ def boundary_section(experiment: ExperimentFolder) -> str:
     heading = "<h2>Robustness boundary</h2>"
     summaries = experiment.summaries("robustness_boundary", "*/*/boundary_summary.json")
     if summaries is None:
-        return f"<section>{heading}<p class='dim'>no boundary search: run <code>sal boundary CONFIG --slam NAME</code></p></section>"
+        return f"<section>{heading}<p class='dim'>no boundary search: run <code>sal boundary CONFIG --system NAME</code></p></section>"
     parts = [heading]
     for path, data in summaries:
         try:

@@ -1,4 +1,4 @@
-"""Storage below the engine: the content-addressed trial cache and its keys.
+"""Storage below the engine: the content-addressed cache of runs and its keys.
 
 The run history, which stores outcomes the engine produced, is one layer up in
 :mod:`pytest_sal.history`."""

@@ -34,7 +34,7 @@ __all__ = ["CacheFolder", "StoredEntry", "check_key", "write_refused"]
 _KEY = re.compile(r"[0-9a-f]{16,128}")
 _TEMP = re.compile(r"\.tmp-(?P<key>[0-9a-f]{16,128})-")
 _SHARD = re.compile(r"[0-9a-f]{2}")
-_GITIGNORE = "# Created by pytest-sal: the trial cache; safe to delete (sal cache clear).\n*\n"
+_GITIGNORE = "# Created by pytest-sal: the cache; safe to delete (sal cache clear).\n*\n"
 #: errno values of a write the file system refuses: read-only (mount or permissions) or full
 #: (disk, quota, file size limit).
 _REFUSED = frozenset({errno.EACCES, errno.EPERM, errno.EROFS, errno.ENOSPC, errno.EDQUOT, errno.EFBIG})

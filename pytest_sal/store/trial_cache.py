@@ -1,4 +1,4 @@
-"""The content-addressed cache of trial results and perturbed sequences.
+"""The content-addressed cache of runs and perturbed sequences (one entry each).
 
 A trial (perturb a dataset at one severity, run a SLAM system N times, score with evo) is named
 by :func:`pytest_sal.store.cache_keys.cache_key` of everything that decides its outcome: the dataset fingerprint, the module
@@ -68,7 +68,7 @@ __all__ = [
     "ContentCache",
     "EntryCheck",
     "command_cache",
-    "default_cache_dir",
+    "content_cache_dir",
 ]
 
 #: The cache folder relative to the pytest rootdir (or the current folder for ``sal cache``).
@@ -81,7 +81,7 @@ EntryCheck = Callable[[dict[str, Any]], str | None]
 # ---------------------------------------------------------------------------------- helpers
 
 
-def default_cache_dir(rootdir: str | os.PathLike[str] | None = None) -> Path:
+def content_cache_dir(rootdir: str | os.PathLike[str] | None = None) -> Path:
     """``<rootdir>/.sal/cache``; ``rootdir`` defaults to the current folder (the plugin passes
     the pytest rootdir; ``--sal-cache-dir`` replaces the whole path)."""
     return Path(rootdir if rootdir is not None else os.getcwd()).expanduser() / DEFAULT_CACHE_DIR
@@ -89,7 +89,7 @@ def default_cache_dir(rootdir: str | os.PathLike[str] | None = None) -> Path:
 
 def command_cache(cache_dir: str | os.PathLike[str] | None = None) -> ContentCache:
     """The cache a ``sal`` command uses: ``--cache-dir``, else ``./.sal/cache``."""
-    return ContentCache(cache_dir if cache_dir is not None else default_cache_dir())
+    return ContentCache(cache_dir if cache_dir is not None else content_cache_dir())
 
 
 # ------------------------------------------------------------------------------------ cache

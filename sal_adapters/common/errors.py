@@ -6,15 +6,17 @@ raises it (``sal_modules.errors``, ``sal_wrappers.base.SlamSystemError``,
 ``pytest_sal.engine.execution.executor.ExecutorError``, ...; ARCHITECTURE.md lists them).
 ``DatasetError`` names the file (and line) that is wrong; ``WriteError`` the file or folder that
 could not be written. ``CacheWarning`` says that a damaged cache entry (a stored frame of the
-synthetic world, a trial result) was discarded and computed again, or that a cache cannot be
+synthetic world, a stored run) was discarded and computed again, or that a cache cannot be
 written (read-only, full).
+``SalDeprecationWarning`` says that an old form of a YAML key or an ini value was read, and names
+the new one.
 """
 
 from __future__ import annotations
 
 from os import PathLike
 
-__all__ = ["MAX_PROBLEM_CHARS", "CacheWarning", "DatasetError", "DatasetWarning", "SalError", "WriteError"]
+__all__ = ["MAX_PROBLEM_CHARS", "CacheWarning", "DatasetError", "DatasetWarning", "SalDeprecationWarning", "SalError", "WriteError"]
 
 
 #: Characters of a ``DatasetError``'s problem (past the file and line): one line, never a dump.
@@ -70,3 +72,8 @@ class DatasetWarning(UserWarning):
 
 class CacheWarning(UserWarning):
     """A bad cache entry was discarded (it is computed again), or the cache cannot be written (read-only, full)."""
+
+
+class SalDeprecationWarning(FutureWarning):
+    """An old form (a YAML key, an ini value) was read as it always was; the message names the
+    new form. A ``FutureWarning``, so users see it by default."""

@@ -24,7 +24,7 @@ from sal_adapters.datasets import DatasetKind
 from sal_adapters.sequence import SENSORS, Frame, Sequence
 from sal_adapters.synthetic.cache import (
     RENDERER_VERSION,
-    default_cache_dir,
+    rendered_frames_dir,
     rendered_sequence,
 )
 from sal_adapters.synthetic.indoor import IndoorWorld
@@ -85,7 +85,7 @@ class SyntheticDataset(DatasetKind):
         frames = _integer("frames", frames, 1)
         seed = _integer("seed", seed, 0)
         world = make_world(scene, seed)
-        folder = Path(cache_dir).expanduser() if cache_dir is not None else default_cache_dir(scene, seed)
+        folder = Path(cache_dir).expanduser() if cache_dir is not None else rendered_frames_dir(scene, seed)
         return rendered_sequence(world, folder, frames, sensor or world.default_sensor)
 
     def write(self, sequence: Sequence, out_dir: Path, frames: Iterable[Frame]) -> Path:

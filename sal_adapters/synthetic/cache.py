@@ -34,14 +34,14 @@ from sal_adapters.synthetic.layout import (
 )
 from sal_adapters.synthetic.world import World
 
-__all__ = ["RENDERER_VERSION", "FrameStore", "default_cache_dir", "frame_stem", "rendered_sequence"]
+__all__ = ["RENDERER_VERSION", "FrameStore", "frame_stem", "rendered_frames_dir", "rendered_sequence"]
 
 #: Bump whenever rendered pixels or depth change: it is part of the cache folder name and
 #: of every rendered sequence's fingerprint.
 RENDERER_VERSION = 1
 
 
-def default_cache_dir(scene: str, seed: int) -> Path:
+def rendered_frames_dir(scene: str, seed: int) -> Path:
     """``<user cache>/synthetic/<scene>-seed<seed>-r<RENDERER_VERSION>``."""
     return user_cache_dir("synthetic", f"{scene}-seed{seed}-r{RENDERER_VERSION}")
 

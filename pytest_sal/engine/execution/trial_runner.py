@@ -1,7 +1,7 @@
 """One trial: perturb the dataset at one severity, run the system, score each run with evo,
 and judge the requirement by its runs. Runs are cached content-addressed, one by one.
 
-A deterministic system (``reference_vo``) gets one run per trial (``evaluate``), and the
+A deterministic system (``reference_vo``) gets one run per trial (``run_trial``), and the
 boundary search bisects on its verdicts. A noisy one (ORB-SLAM3 is multi-threaded and uses
 RANSAC: about one run in six splits its map on a clean 51-frame KITTI sequence) is searched by
 ``pytest_sal.engine.search.reliability_search``, which places its runs with ``add_runs``
@@ -231,7 +231,7 @@ class TrialRunner:
         """The first run at ``value`` is in the cache: a trial there costs no run (``run_cached``)."""
         return self.run_cached(value, 0)
 
-    def evaluate(self, value: float) -> Trial:
+    def run_trial(self, value: float) -> Trial:
         """The trial at ``value`` of a deterministic system: one run."""
         trial = Trial(value=float(value), passed=False)
         self._extend(trial)

@@ -2,7 +2,7 @@
 system stops meeting its requirement. Pure: it knows values and verdicts, not SLAM.
 
 Severity runs from ``mild`` to ``severe`` (for fog, from long to short visibility). The
-search evaluates the envelope's ``edge`` first: that trial decides the test. If it passes, the
+search tries the envelope's ``edge`` first: that trial decides the test. If it passes, the
 failure boundary lies on the severe side and the search bisects between the edge and the
 severe end; if it fails, the boundary lies on the mild side and it bisects between the edge and
 the mild end. The interval ``(pass_value, fail_value)`` shrinks until it is within tolerance,
@@ -23,13 +23,13 @@ tolerance, an unchanged system needs three trials. Every trial is checked agains
 pass more severe than a fail contradicts monotonicity and is reported.
 
 Free workers. ``width`` says before each round how many trials a round may hold now (free
-workers over the runs a trial needs). A round is one evaluation of several values at once, each
-in its own thread (``evaluate`` must then be safe to call from several threads for distinct
+workers over the runs a trial needs). A round tries several values at once, each
+in its own thread (``run_trial`` must then be safe to call from several threads for distinct
 values). The edge goes alone; the warm-start hints go together; then the far end. Bisection
-speculates: with ``k`` trials free it evaluates the first ``k`` nodes, breadth-first, of the
+speculates: with ``k`` trials free it tries the first ``k`` nodes, breadth-first, of the
 bisection tree below the bracket (``k = 3``: the midpoint and both quarter points, the 4-ary
 search; ``k = 7``: the 8-ary search). A node exists only where the sequential search would
-evaluate it on reaching its bracket (the same tolerance, domain and budget rules, its depth
+try it on reaching its bracket (the same tolerance, domain and budget rules, its depth
 counted against ``max_trials``). A partial last level takes its nodes in bit-reversed order
 (each node's path of verdicts from the root read backwards), so they spread evenly over the
 bracket, starting on the side the path's last verdict leads to if it repeats: a boundary near
@@ -45,7 +45,7 @@ path, as in a second session, walks it without speculating and sends nothing.
 Why the interval is the sequential one: a node lies strictly inside its bracket, and its two
 children bisect the halves the sequential search would hold after its pass or fail (a verdict
 strictly inside the bracket moves the matching end, whatever came before), so the walk
-evaluates what the sequential search would, in its order. Each node off the walk lies in a half
+tries what the sequential search would, in its order. Each node off the walk lies in a half
 the walk turned away from, outside the bracket the walk ends in, and a trial outside the bracket
 moves neither end (``_Search.bracket`` takes only a pass or a fail strictly between them): for
 any deterministic system, a monotone one included, off-path trials never move the bracket, and
@@ -105,8 +105,8 @@ class SearchSpace:
 
 @dataclass
 class TrialPoint:
-    """One evaluated value: ``passed`` and whatever the evaluator reported (``info``);
-    ``speculative``: evaluated in a round beside the search path and left off it."""
+    """One value tried: ``passed`` and whatever ``run_trial`` reported (``info``);
+    ``speculative``: tried in a round beside the search path and left off it."""
 
     value: float
     passed: bool
@@ -123,9 +123,9 @@ class SearchResult:
         pass_value, fail_value: the bracket: the most severe value seen to pass next to the
             mildest value seen to fail (either may be ``None`` when not bracketed).
         termination: one of ``TERMINATIONS``.
-        trials: every evaluation: each round's path trials in order, then its speculative ones.
+        trials: every trial: each round's path trials in order, then its speculative ones.
         contradictions: trials that contradict monotonicity, in words.
-        rounds: evaluation rounds (one at a time: as many as trials).
+        rounds: rounds of trials (one at a time: as many as trials).
     """
 
     edge_passed: bool
@@ -138,12 +138,12 @@ class SearchResult:
 
     @property
     def speculative(self) -> int:
-        """Trials evaluated beside the search path and left off it (extra to ``max_trials``)."""
+        """Trials tried beside the search path and left off it (extra to ``max_trials``)."""
         return sum(t.speculative for t in self.trials)
 
 
 def boundary_search(
-    evaluate: Callable[[float], tuple[bool, Any]],
+    run_trial: Callable[[float], tuple[bool, Any]],
     space: SearchSpace,
     edge: float,
     tolerance: float | None = None,
@@ -156,15 +156,15 @@ def boundary_search(
     """Search the failure boundary (see the module text).
 
     Args:
-        evaluate: value -> ``(passed, info)``; one trial.
+        run_trial: value -> ``(passed, info)``; runs the trial at the value.
         space: search range, domain and scale.
         edge: the envelope's edge (its most severe value).
         tolerance: stop when ``|pass_value - fail_value| <= tolerance`` (the parameter's unit).
-        max_trials: at most this many evaluations on the search path, the edge included.
+        max_trials: at most this many trials on the search path, the edge included.
         warm_start: a previous ``(pass_value, fail_value)`` tried first after the edge.
         rel_tolerance: stop when the bracket's width is at most this share of its larger end.
         width: how many trials a round may hold now, asked before each round (``None``: 1,
-            the sequential search); above 1, ``evaluate`` is called from several threads at
+            the sequential search); above 1, ``run_trial`` is called from several threads at
             once, for distinct values.
         cached: whether a trial at a value would be read back from a cache (it costs no run):
             a bisection step whose midpoint is cached goes alone, without speculative trials
@@ -172,7 +172,7 @@ def boundary_search(
     """
     if tolerance is None and rel_tolerance is None:
         raise ValueError("boundary_search needs tolerance or rel_tolerance")
-    search = _Search(evaluate, space, max_trials, width or (lambda: 1), tolerance, rel_tolerance, cached or (lambda value: False))
+    search = _Search(run_trial, space, max_trials, width or (lambda: 1), tolerance, rel_tolerance, cached or (lambda value: False))
     (first,) = search.run([edge])
     edge_passed = first.passed
     far = space.severe if edge_passed else space.mild
@@ -212,11 +212,11 @@ class _Node:
 
 
 class _Search:
-    """The trials of one search, the bracket they give and the rounds that evaluated them."""
+    """The trials of one search, the bracket they give and the rounds that tried them."""
 
     def __init__(
         self,
-        evaluate: Callable[[float], tuple[bool, Any]],
+        run_trial: Callable[[float], tuple[bool, Any]],
         space: SearchSpace,
         max_trials: int,
         width: Callable[[], int],
@@ -224,7 +224,7 @@ class _Search:
         rel_tolerance: float | None,
         cached: Callable[[float], bool],
     ):
-        self.evaluate = evaluate
+        self.run_trial = run_trial
         self.space = space
         self.max_trials = max_trials
         self.width = width
@@ -282,7 +282,7 @@ class _Search:
 
     def _stop(self, passing: float, failing: float, ahead: int = 0) -> str | None:
         """Why the sequential search would stop at this bracket, ``ahead`` path trials from now
-        (``None``: it would evaluate the midpoint)."""
+        (``None``: it would try the midpoint)."""
         width = abs(passing - failing)
         if (self.tolerance is not None and width <= self.tolerance) or (
             self.rel_tolerance is not None and width <= self.rel_tolerance * max(abs(passing), abs(failing))
@@ -313,7 +313,7 @@ class _Search:
         return chosen
 
     def _point(self, value: float) -> TrialPoint:
-        passed, info = self.evaluate(value)
+        passed, info = self.run_trial(value)
         return TrialPoint(value, bool(passed), info)
 
     def _in_rounds(self, work: Callable[[_Item], _Done], items: Sequence[_Item]) -> list[_Done]:

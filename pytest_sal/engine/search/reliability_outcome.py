@@ -21,6 +21,7 @@ from pytest_sal.engine.outcomes.quantity import with_unit
 from pytest_sal.engine.search.bisection import SearchSpace
 from pytest_sal.engine.search.reliability_curve import SeverityAxis
 from pytest_sal.engine.search.reliability_search import Observation, ReliabilityResult, more_runs_needed, reliability_search
+from pytest_sal.engine.tolerance import search_tolerances
 
 if TYPE_CHECKING:
     from pytest_sal.engine.execution.trial_runner import TrialRunner
@@ -41,8 +42,7 @@ class Targets:
         self.reliability = float(options.get("reliability", settings.reliability))
         self.confidence = float(options.get("confidence", settings.confidence))
         self.max_runs = int(options.get("max_runs", settings.max_runs))
-        self.tolerance: float | None = options.get("tolerance")
-        self.rel_tolerance = None if self.tolerance is not None else settings.tolerance_pct / 100
+        self.tolerance, self.rel_tolerance = search_tolerances(options, settings.tolerance_pct)
 
 
 def axis_of(space: SearchSpace, edge: float, targets: Targets) -> SeverityAxis:

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 from pytest_sal.engine.outcomes.outcome import Boundary, Outcome, Trial
 from pytest_sal.engine.requirements import InvalidRequirement, Requirement, SearchSettings
 from pytest_sal.engine.search.bisection import SearchResult, SearchSpace, boundary_search
+from pytest_sal.engine.tolerance import search_tolerances
 from sal_modules.params import ParamRef
 
 if TYPE_CHECKING:  # the plugin reads SearchSettings at configure time, before any trial runs
@@ -40,22 +41,21 @@ def run_search(
     warm_start: tuple[float | None, float | None] | None = None,
 ) -> SearchResult:
     """The boundary search of ``requirement`` with ``runner`` (a deterministic system: one run
-    a trial, every verdict final): a round's trials are evaluated in threads, as many as
+    a trial, every verdict final): a round's trials are run in threads, as many as
     ``search_width`` allows; a trial left off the search path is marked ``Trial.speculative``."""
     envelope = requirement.envelope
     assert envelope is not None
     space = search_space(envelope.ref, requirement.options.get("search_range"))
-    tolerance = requirement.options.get("tolerance")
-    rel_tolerance = None if tolerance is not None else settings.tolerance_pct / 100
+    tolerance, rel_tolerance = search_tolerances(requirement.options, settings.tolerance_pct)
     max_trials = requirement.options.get("max_trials", settings.max_trials)
     _refuse_unchanged(runner, requirement)
 
-    def evaluate(value: float) -> tuple[bool, Trial]:
-        trial = runner.evaluate(value)
+    def run_trial(value: float) -> tuple[bool, Trial]:
+        trial = runner.run_trial(value)
         return trial.passed, trial
 
     result = boundary_search(
-        evaluate,
+        run_trial,
         space,
         envelope.value,
         tolerance,
@@ -116,7 +116,7 @@ def single_outcome(
     settled at ``confidence``, or ``max_runs`` are spent."""
     if runner.policy.noisy:
         return _noisy_outcome(runner, requirement, settings or SearchSettings(), test_id, value, single=True, earlier=earlier)
-    trial = runner.evaluate(value)
+    trial = runner.run_trial(value)
     boundary = Boundary(value if trial.passed else None, None if trial.passed else value, runner.ref.unit)
     return _outcome(runner, requirement, test_id, "passed" if trial.passed else "failed", boundary, "single", [trial], [])
 
