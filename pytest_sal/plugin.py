@@ -21,7 +21,7 @@ from pytest_sal.engine.outcomes.quantity import num, with_unit
 from pytest_sal.engine.requirements import InvalidRequirement
 from pytest_sal.engine.search.requirement_search import failure_message
 from pytest_sal.html_extras import HtmlExtras
-from pytest_sal.options import add_options
+from pytest_sal.option_table import add_options
 from pytest_sal.report.formatting import trial_line
 from pytest_sal.report.outcome_report import trial_metric_names
 from pytest_sal.session import SAL_SESSION, SalSession
