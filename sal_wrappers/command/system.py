@@ -157,6 +157,17 @@ class CommandSystem(SlamSystem):
         return {**super().identity(), "system": "command", "files": files}
 
     # -- running -------------------------------------------------------------------------------
+    def _layout(self, sequence: Sequence, mode: str) -> str:
+        """The dataset layout the sequence is staged in (``layout=``, else the sequence's own),
+        refused when it cannot hold ``mode``'s data."""
+        layout = self.config.layout or sequence.kind
+        if layout in LAYOUT_SENSORS and mode not in LAYOUT_SENSORS[layout]:
+            raise SlamSystemError(
+                f"command: the {layout} layout cannot hold {mode} data (it holds {', '.join(LAYOUT_SENSORS[layout])}); "
+                f"choose another layout= or sensor='mono'"
+            )
+        return layout
+
     def run(self, sequence: Sequence, workdir: Path, timeout: float | None = None, stop: StopCheck | None = None) -> RunResult:
         """Stage ``sequence`` under ``workdir/<stage_dir>``, run the program (log: ``workdir/run.log``),
         read its trajectory. Failures of the program come back in the result. ``stop`` is
@@ -168,13 +179,7 @@ class CommandSystem(SlamSystem):
             return self.no_frames_result(sequence)
         workdir = Path(workdir).expanduser().resolve()
         workdir.mkdir(parents=True, exist_ok=True)
-        layout = config.layout or sequence.kind
-        if layout in LAYOUT_SENSORS and mode not in LAYOUT_SENSORS[layout]:
-            raise SlamSystemError(
-                f"command: the {layout} layout cannot hold {mode} data (it holds {', '.join(LAYOUT_SENSORS[layout])}); "
-                f"choose another layout= or sensor='mono'"
-            )
-
+        layout = self._layout(sequence, mode)
         stage_start = time.monotonic()
         staged = self._stage(sequence, mode, workdir, layout)
         values = placeholder_values(sequence, mode, workdir, staged, config.settings)
