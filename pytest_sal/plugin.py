@@ -214,10 +214,7 @@ class PendingSearch:
     def run(self) -> Any:
         """The outcome: the boundary search, or the one trial at the sweep level."""
         session: SalSession = self.item.config.stash[SAL_SESSION]
-        if self.level is None:
-            return session.search(self.item, self.dataset, self.system, self.runs, self.workdir)
-        ref, _, value = self.level
-        return session.single(self.item, ref, value, self.dataset, self.system, self.runs, self.workdir)
+        return session.outcome(self.item, self.dataset, self.system, self.runs, self.workdir, self.level)
 
     def __getattr__(self, name: str) -> Any:
         raise AttributeError(

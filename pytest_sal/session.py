@@ -42,7 +42,7 @@ class SalSession:
         self._history: History | None = None
         self._executor: Executor | None = None
         self._datasets: dict[str, Any] = {}
-        #: a noisy system's trials so far, per family (system, dataset, parameter and seed: ``_run``)
+        #: a noisy system's trials so far, per family (system, dataset, parameter and seed: ``outcome``)
         self._noisy_trials: dict[str, dict[float, Any]] = {}
 
     @property
@@ -121,32 +121,28 @@ class SalSession:
         return create(self.default_system_name())
 
     # -- running -------------------------------------------------------------------------------
-    def search(self, item: pytest.Item, dataset: Any, system: Any, runs: int | None, workdir: Path) -> Any:
-        """Boundary search of ``item``'s requirement, from the previous boundary (``_start_from``)."""
-        from pytest_sal.history.regression import warm_start
-
-        requirement = requirement_of(item)
-        envelope = None if requirement is None else requirement.envelope
-        assert envelope is not None  # collection refuses a sal.require without one unless sal.sweep / sal.at is above it
-        previous = self._start_from((item.nodeid, system.name, dataset.name))
-        start = warm_start(previous, parameter=envelope.ref.label, edge=envelope.value, worse=envelope.ref.param.worse)
-        return self._run(item, envelope.ref, dataset, system, runs, workdir, warm_start=start)
-
-    def single(self, item: pytest.Item, ref: Any, value: float, dataset: Any, system: Any, runs: int | None, workdir: Path) -> Any:
-        """The outcome of ``item``'s requirement at the one ``value`` (a ``sal.sweep`` level, ``sal.at``)."""
-        return self._run(item, ref, dataset, system, runs, workdir, point=value)
-
-    def _run(self, item: pytest.Item, ref: Any, dataset: Any, system: Any, runs: int | None, workdir: Path, **where: Any) -> Any:
-        """``item``'s ``Search`` (``where``: its ``point`` or ``warm_start``) run by ``run_search``
-        with the session's cache and executor; under ``-v`` each trial is printed as it ends;
-        compared with the history when asked."""
+    def outcome(self, item: pytest.Item, dataset: Any, system: Any, runs: int | None, workdir: Path, level: Any = None) -> Any:
+        """The outcome of ``item``: its ``Search`` (the boundary search of its requirement from
+        the previous boundary, ``_start_from``, or the one value of its ``sal.sweep`` ``level``)
+        run by ``run_search`` with the session's cache and executor; under ``-v`` each trial is
+        printed as it ends; compared with the history when asked."""
         from pytest_sal.engine.search.requirement_search import Search, run_search
+        from pytest_sal.history.regression import warm_start
         from pytest_sal.progress import trial_printer
         from pytest_sal.report.outcome_report import trial_metric_names
         from pytest_sal.store.cache_keys import cache_key
 
         requirement = requirement_of(item)
         assert requirement is not None  # the fixtures run only for tests with a sal.require mark
+        where: dict[str, Any]  # the Search's warm_start, or its point
+        if level is None:
+            envelope = requirement.envelope
+            assert envelope is not None  # collection refuses a sal.require without one unless sal.sweep / sal.at is above it
+            ref, previous = envelope.ref, self._start_from((item.nodeid, system.name, dataset.name))
+            where = {"warm_start": warm_start(previous, parameter=ref.label, edge=envelope.value, worse=ref.param.worse)}
+        else:
+            ref, _, value = level
+            where = {"point": value}
         seed = int(requirement.options.get("seed", self.options.seed))
         # runs of one family are interchangeable between requirements (their records are metrics, judged by each requirement)
         family = cache_key(system=system.identity(), dataset=dataset.fingerprint, parameter=ref.label, seed=seed)

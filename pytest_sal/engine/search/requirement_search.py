@@ -201,9 +201,10 @@ def search_outcome(
     warm_start: tuple[float | None, float | None] | None = None,
     earlier: list[Trial] | None = None,
 ) -> Outcome:
-    """Run the boundary search of ``requirement`` with ``runner`` and describe what it found
-    (a noisy system's: the curve of its chance to hold, ``reliability_outcome``, which also
-    counts the runs of ``earlier`` trials of the session)."""
+    """Run the boundary search of ``requirement`` with ``runner`` (``run_search`` builds it; a
+    test may give its own) and describe what it found (a noisy system's: the curve of its
+    chance to hold, ``reliability_outcome``, which also counts the runs of ``earlier`` trials
+    of the session)."""
     if runner.policy.noisy:
         return _noisy_outcome(runner, requirement, settings, test_id, requirement.envelope.value, earlier=earlier)  # type: ignore[union-attr]
     result = deterministic_search(runner, requirement, settings, warm_start)
