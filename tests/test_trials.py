@@ -145,17 +145,17 @@ def test_the_kitti_segments_key_the_run_and_score_t_rel(tmp_path: Path) -> None:
 def test_each_value_builds_and_validates_its_module_once(tmp_path: Path, monkeypatch) -> None:
     """The cache keys of its runs, their jobs and the unchanged-frames check share the module at a value."""
     from pytest_sal.engine.search.requirement_search import SearchSettings, search_outcome
-    from sal_modules.param_refs import ParamRef
 
+    param_ref = type(fog.visibility_m.ref())  # the class, wherever it lives
     room, noisy = runner(tmp_path, FakeSlam()), runner(tmp_path, FakeSlam(), runs=3)  # Requirement.build checks its edge
     built: list[float] = []
-    build = ParamRef.module
+    build = param_ref.module
 
-    def counted(ref: ParamRef, value: float):
+    def counted(ref, value: float):
         built.append(value)
         return build(ref, value)
 
-    monkeypatch.setattr(ParamRef, "module", counted)
+    monkeypatch.setattr(param_ref, "module", counted)
     outcome = search_outcome(room, room.requirement, SearchSettings(max_trials=4), "test_room")
     assert built == [t.value for t in outcome.trials] and len(outcome.trials) == 4  # the edge first: checked, keyed, run
     built.clear()
