@@ -36,7 +36,7 @@ from pytest_sal.engine.execution.run_job import RunJob, RunOutput
 from pytest_sal.engine.execution.trial_runner import TrialRunner
 from pytest_sal.engine.outcomes.outcome import Boundary
 from pytest_sal.engine.requirements import Requirement
-from pytest_sal.engine.search.requirement_search import SearchSettings, run_search
+from pytest_sal.engine.search.requirement_search import SearchSettings, deterministic_search
 from pytest_sal.testing import InProcessSlots, SleepySlam
 from sal_adapters import open_dataset
 from sal_modules import fog
@@ -81,7 +81,7 @@ def measure(k: int, base: Executor | None, args: argparse.Namespace, workdir: Pa
         system = SleepySlam(sleep_s=args.sleep)
         runner = TrialRunner(dataset, fog.visibility_m.ref(), system, requirement, workdir=workdir / f"k{k}-{repeat}", executor=executor)
         start = time.perf_counter()
-        result = run_search(runner, requirement, settings)
+        result = deterministic_search(runner, requirement, settings)
         wall = time.perf_counter() - start
         path = sum(not t.speculative for t in result.trials)
         interval = Boundary(result.pass_value, result.fail_value, "m").text()

@@ -6,11 +6,13 @@
 >>> from sal_modules import fog
 >>> @sal.require(ate_rmse < 1.5, fog.visibility_m >= 25)
 ... def test_fog(sal_outcome): ...
->>> test_fog.sal_requirement.envelope.value
-25.0
+>>> [mark.name for mark in test_fog.pytestmark]
+['sal', 'sal_require', 'usefixtures']
 
 Each decorator validates what it is given when the test module is imported (so pytest reports
-misuse at collection) and attaches registered marks the plugin reads.
+misuse at collection) and attaches registered marks: the marks are what the plugin reads
+(``requirement_of``, ``levels_of``); ``pytest.mark.sal_require(requirement)`` written by hand
+is the same requirement.
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ from pytest_sal.engine.requirements import InvalidRequirement, Requirement
 from sal_adapters.common.errors import SalError
 from sal_modules.params import ParamRef
 
-__all__ = ["at", "dataset_fixture", "require", "sweep"]
+__all__ = ["at", "dataset_fixture", "levels_of", "require", "requirement_of", "sweep"]
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -69,11 +71,10 @@ def require(
     requirement = Requirement.build(criteria_and_envelope, **options)
 
     def decorate(function: F) -> F:
-        if hasattr(function, "sal_requirement"):
+        if _marked(function, "sal_require"):
             raise InvalidRequirement(f"{function.__name__}: sal.require() is applied twice; give one requirement per test")
-        function.sal_requirement = requirement  # type: ignore[attr-defined]
         marks = [pytest.mark.sal, pytest.mark.sal_require(requirement)]
-        if requirement.envelope is not None and not hasattr(function, "sal_levels"):
+        if requirement.envelope is not None and not _marked(function, "sal_sweep"):
             marks.append(pytest.mark.usefixtures("sal_outcome"))
         for mark in marks:
             function = mark(function)
@@ -94,7 +95,6 @@ def sweep(param: Any, **levels: float) -> Callable[[F], F]:
         _check_value(ref, value, f"sal.sweep level {name}")
 
     def decorate(function: F) -> F:
-        function.sal_levels = (ref, dict(levels))  # type: ignore[attr-defined]
         return pytest.mark.sal(pytest.mark.sal_sweep(ref, dict(levels))(function))
 
     return decorate
@@ -119,7 +119,6 @@ def at(param: Any = None, value: float | None = None, **by_address: float) -> Ca
     _check_value(ref, value, "sal.at")
 
     def decorate(function: F) -> F:
-        function.sal_levels = (ref, {"at": float(value)})  # type: ignore[attr-defined]
         return pytest.mark.sal(pytest.mark.sal_sweep(ref, {"at": float(value)})(function))
 
     return decorate
@@ -140,6 +139,24 @@ def dataset_fixture(kind: str, path: str | None = None, *, scope: str = "session
         return open_dataset(kind, path, **options)
 
     return sal_dataset
+
+
+def requirement_of(node: pytest.Item) -> Requirement | None:
+    """The requirement of a test: its ``sal_require`` mark (``sal.require``), or ``None``."""
+    mark = node.get_closest_marker("sal_require")
+    return None if mark is None else mark.args[0]
+
+
+def levels_of(node: pytest.Item) -> tuple[ParamRef, dict[str, float]] | None:
+    """The parameter and named levels of a test: its ``sal_sweep`` mark (``sal.sweep``,
+    ``sal.at``, whose one level is ``at``), or ``None``."""
+    mark = node.get_closest_marker("sal_sweep")
+    return None if mark is None else (mark.args[0], mark.args[1])
+
+
+def _marked(function: Callable[..., Any], name: str) -> bool:
+    """``function`` already carries the mark ``name`` (pytest keeps a function's marks in ``pytestmark``)."""
+    return any(mark.name == name for mark in getattr(function, "pytestmark", ()))
 
 
 def _ref(param: Any, where: str) -> ParamRef:

@@ -15,6 +15,7 @@ from typing import Any
 
 import pytest
 
+from pytest_sal.api import levels_of, requirement_of
 from pytest_sal.controller_lifeline import follow_controller
 from pytest_sal.engine.outcomes.outcome import Outcome
 from pytest_sal.engine.outcomes.quantity import num, with_unit
@@ -96,7 +97,7 @@ def pytest_report_header(config: pytest.Config) -> list[str]:
 
 def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
     """``sal.sweep`` / ``sal.at``: one item per level, id ``L-rain.intensity_mm_h=3`` (see ``level_id``)."""
-    levels = getattr(metafunc.function, "sal_levels", None)
+    levels = levels_of(metafunc.definition)
     if levels is None:
         return
     ref, named = levels
@@ -121,11 +122,7 @@ def level_id(ref: Any, name: str, value: float) -> str:
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Check every robustness test's marks before anything runs."""
     for item in items:
-        function = getattr(item, "function", None)
-        if function is None:
-            continue
-        requirement = getattr(function, "sal_requirement", None)
-        levels = getattr(function, "sal_levels", None)
+        requirement, levels = requirement_of(item), levels_of(item)
         message = None
         if levels is not None and requirement is None:
             message = f"{item.nodeid}: sal.sweep / sal.at need a sal.require(...) below them with the criteria each level must meet"
@@ -158,7 +155,7 @@ def sal_runs(request: pytest.FixtureRequest) -> int | None:
     """The most runs per trial: ``runs=`` of ``sal.require``, else ini ``sal_runs``, else
     ``None`` (1 for a deterministic system, 5 for a noisy one such as ORB-SLAM3); above 1 the
     system is searched as a noisy one (its chance to hold). Override in conftest.py for every test."""
-    requirement = getattr(request.function, "sal_requirement", None)
+    requirement = requirement_of(request.node)
     if requirement is not None and "runs" in requirement.options:
         return int(requirement.options["runs"])
     return request.config.stash[SAL_SESSION].runs
@@ -217,10 +214,7 @@ class PendingSearch:
     def run(self) -> Any:
         """The outcome: the boundary search, or the one trial at the sweep level."""
         session: SalSession = self.item.config.stash[SAL_SESSION]
-        if self.level is None:
-            return session.search(self.item, self.dataset, self.system, self.runs, self.workdir)
-        ref, _, value = self.level
-        return session.single(self.item, ref, value, self.dataset, self.system, self.runs, self.workdir)
+        return session.outcome(self.item, self.dataset, self.system, self.runs, self.workdir, self.level)
 
     def __getattr__(self, name: str) -> Any:
         raise AttributeError(
@@ -229,10 +223,10 @@ class PendingSearch:
 
 
 def _ref_of(request: pytest.FixtureRequest) -> Any:
-    requirement = getattr(request.function, "sal_requirement", None)
+    requirement = requirement_of(request.node)
     if requirement is not None and requirement.envelope is not None:
         return requirement.envelope.ref
-    levels = getattr(request.function, "sal_levels", None)
+    levels = levels_of(request.node)
     return levels[0] if levels else None
 
 

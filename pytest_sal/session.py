@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 import pytest
 
+from pytest_sal.api import requirement_of
 from pytest_sal.options import read_options
 from pytest_sal.session_results import SessionResults
 
@@ -41,7 +42,7 @@ class SalSession:
         self._history: History | None = None
         self._executor: Executor | None = None
         self._datasets: dict[str, Any] = {}
-        #: a noisy system's trials so far, per system, dataset, parameter and seed (``_family``)
+        #: a noisy system's trials so far, per family (system, dataset, parameter and seed: ``outcome``)
         self._noisy_trials: dict[str, dict[float, Any]] = {}
 
     @property
@@ -120,62 +121,52 @@ class SalSession:
         return create(self.default_system_name())
 
     # -- running -------------------------------------------------------------------------------
-    def _runner(self, item: pytest.Item, ref: Any, dataset: Any, system: Any, runs: int | None, workdir: Path) -> Any:
-        """The trial runner of ``item``; under ``-v`` it prints each trial as it ends."""
-        from pytest_sal.engine.execution.trial_runner import TrialRunner
+    def outcome(self, item: pytest.Item, dataset: Any, system: Any, runs: int | None, workdir: Path, level: Any = None) -> Any:
+        """The outcome of ``item``: its ``Search`` (the boundary search of its requirement from
+        the previous boundary, ``_start_from``, or the one value of its ``sal.sweep`` ``level``)
+        run by ``run_search`` with the session's cache and executor; under ``-v`` each trial is
+        printed as it ends; compared with the history when asked."""
+        from pytest_sal.engine.search.requirement_search import Search, run_search
+        from pytest_sal.history.regression import warm_start
         from pytest_sal.progress import trial_printer
         from pytest_sal.report.outcome_report import trial_metric_names
+        from pytest_sal.store.cache_keys import cache_key
 
-        requirement = item.function.sal_requirement  # type: ignore[attr-defined]
+        requirement = requirement_of(item)
+        assert requirement is not None  # the fixtures run only for tests with a sal.require mark
+        where: dict[str, Any]  # the Search's warm_start, or its point
+        if level is None:
+            envelope = requirement.envelope
+            assert envelope is not None  # collection refuses a sal.require without one unless sal.sweep / sal.at is above it
+            ref, previous = envelope.ref, self._start_from((item.nodeid, system.name, dataset.name))
+            where = {"warm_start": warm_start(previous, parameter=ref.label, edge=envelope.value, worse=ref.param.worse)}
+        else:
+            ref, _, value = level
+            where = {"point": value}
         seed = int(requirement.options.get("seed", self.options.seed))
-        metrics = trial_metric_names([(c.metric.name, c.op, c.threshold) for c in requirement.criteria])  # as the reports show them
-        return TrialRunner(
+        # runs of one family are interchangeable between requirements (their records are metrics, judged by each requirement)
+        family = cache_key(system=system.identity(), dataset=dataset.fingerprint, parameter=ref.label, seed=seed)
+        search = Search(
             dataset,
             ref,
             system,
             requirement,
+            item.nodeid,
+            self.options.search,
             runs=runs,
             seed=seed,
-            cache=self.cache,
-            workdir=workdir,
             timeout=self.options.timeout,
+            workdir=workdir,
             artifacts=bool(self.options.report_html or getattr(self.config.option, "htmlpath", None)),  # ours or pytest-html's
             cache_frames=self.options.cache_frames,
             kitti_segments=self.options.kitti_segments,
             early_stop=self.options.early_stop,
-            progress=trial_printer(self.config, item.nodeid, ref.label, ref.unit, metrics),
-            executor=self.executor(),
+            earlier=tuple(self._earlier(family)),
+            **where,
         )
-
-    def search(self, item: pytest.Item, dataset: Any, system: Any, runs: int | None, workdir: Path) -> Any:
-        """Boundary search of ``item``'s requirement; compared with the history when asked."""
-        from pytest_sal.engine.search.requirement_search import search_outcome
-        from pytest_sal.history.regression import warm_start
-
-        requirement = item.function.sal_requirement  # type: ignore[attr-defined]
-        runner = self._runner(item, requirement.envelope.ref, dataset, system, runs, workdir)
-        previous = self._start_from((item.nodeid, system.name, dataset.name))
-        envelope = requirement.envelope
-        start = warm_start(previous, parameter=envelope.ref.label, edge=envelope.value, worse=envelope.ref.param.worse)
-        family = self._family(runner)
-        outcome = search_outcome(runner, requirement, self.options.search, item.nodeid, start, earlier=self._earlier(family))
-        return self._finished(outcome, system, family)
-
-    def single(self, item: pytest.Item, ref: Any, value: float, dataset: Any, system: Any, runs: int | None, workdir: Path) -> Any:
-        from pytest_sal.engine.search.requirement_search import single_outcome
-
-        runner = self._runner(item, ref, dataset, system, runs, workdir)
-        family = self._family(runner)
-        requirement = item.function.sal_requirement  # type: ignore[attr-defined]
-        outcome = single_outcome(runner, requirement, item.nodeid, value, self.options.search, self._earlier(family))
-        return self._finished(outcome, system, family)
-
-    def _family(self, runner: Any) -> str:
-        """Runs of one family are interchangeable between requirements (their records are metrics,
-        judged by each requirement): the system, dataset, parameter and seed, as a cache key."""
-        from pytest_sal.store.cache_keys import cache_key
-
-        return cache_key(system=runner.system.identity(), dataset=runner.dataset.fingerprint, parameter=runner.ref.label, seed=runner.seed)
+        metrics = trial_metric_names([(c.metric.name, c.op, c.threshold) for c in requirement.criteria])  # as the reports show them
+        progress = trial_printer(self.config, item.nodeid, ref.label, ref.unit, metrics)
+        return self._finished(run_search(search, self.cache, self.executor(), progress), system, family)
 
     def _earlier(self, family: str) -> list[Any]:
         """The noisy system's trials of ``family`` run earlier in this session (every run counts)."""

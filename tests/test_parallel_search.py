@@ -20,7 +20,7 @@ from pytest_sal.engine.execution.trial_runner import TrialRunner
 from pytest_sal.engine.outcomes.outcome import Outcome
 from pytest_sal.engine.requirements import Requirement
 from pytest_sal.engine.search.bisection import SearchResult, SearchSpace, _Search, boundary_search
-from pytest_sal.engine.search.requirement_search import SearchSettings, run_search, search_outcome, search_width
+from pytest_sal.engine.search.requirement_search import SearchSettings, deterministic_search, search_outcome, search_width
 from pytest_sal.report.formatting import trial_line
 from pytest_sal.testing import FakeSlam, InProcessSlots
 from sal_adapters import open_dataset
@@ -231,8 +231,8 @@ def fake_runner(tmp_path: Path, k: int) -> TrialRunner:
 def test_free_slots_give_the_same_outcome_in_fewer_rounds_through_the_runner(tmp_path: Path) -> None:
     settings = SearchSettings(tolerance_pct=5.0, max_trials=12)
     one, four = fake_runner(tmp_path, 1), fake_runner(tmp_path, 4)
-    sequential = run_search(one, one.requirement, settings)
-    parallel = run_search(four, four.requirement, settings)
+    sequential = deterministic_search(one, one.requirement, settings)
+    parallel = deterministic_search(four, four.requirement, settings)
     assert (parallel.pass_value, parallel.fail_value, parallel.termination) == (sequential.pass_value, sequential.fail_value, "tolerance")
     assert sequential.fail_value is not None and sequential.pass_value is not None
     assert sequential.fail_value < 17.5 <= sequential.pass_value and not sequential.speculative
@@ -269,10 +269,10 @@ def test_a_search_cached_along_its_path_sends_no_run_and_does_not_speculate(tmp_
     cache = ContentCache(tmp_path / "cache")
     first = fake_runner(tmp_path, 1)
     first.cache = cache
-    sequential = run_search(first, first.requirement, settings)
+    sequential = deterministic_search(first, first.requirement, settings)
     again = fake_runner(tmp_path, 4)
     again.cache = cache
-    cached = run_search(again, again.requirement, settings)
+    cached = deterministic_search(again, again.requirement, settings)
     assert again.executor.submitted == 0 and cached.speculative == 0
     assert [(t.value, t.passed) for t in cached.trials] == [(t.value, t.passed) for t in sequential.trials]
     # the pure search: a cached midpoint goes alone, an uncached one beside speculative trials

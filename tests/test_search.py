@@ -217,9 +217,9 @@ def test_sal_at_and_sweep_values_are_the_module_values_in_its_unit() -> None:
     @sal.require(tracking_rate >= 0.9)
     def test_iso(sal_trial): ...
 
-    ref, levels = test_dark.sal_levels
+    ref, levels = next(m.args for m in test_dark.pytestmark if m.name == "sal_sweep")
     assert levels == {"at": 1.0} and ref.module(levels["at"]).illuminance_lux == 1.0
-    ref, levels = test_iso.sal_levels
+    ref, levels = next(m.args for m in test_iso.pytestmark if m.name == "sal_sweep")
     assert [ref.module(v).iso for v in levels.values()] == [200.0, 6400.0]
     assert sal.sweep(sensor_noise.iso, L=50)  # below the search range, still a valid ISO
     with pytest.raises(

@@ -140,3 +140,24 @@ def test_the_kitti_segments_key_the_run_and_score_t_rel(tmp_path: Path) -> None:
     assert trial.metrics["t_rel"] < 1e-6 and trial.metrics["r_rel"] < 1e-6 and trial.metrics["kitti_missing"] is None
     default = runner(tmp_path, FakeSlam()).run_trial(40.0)
     assert default.metrics["t_rel"] is None and "too short for a segment of 100 m" in default.metrics["kitti_missing"]
+
+
+def test_each_value_builds_and_validates_its_module_once(tmp_path: Path, monkeypatch) -> None:
+    """The cache keys of its runs, their jobs and the unchanged-frames check share the module at a value."""
+    from pytest_sal.engine.search.requirement_search import SearchSettings, search_outcome
+
+    param_ref = type(fog.visibility_m.ref())  # the class, wherever it lives
+    room, noisy = runner(tmp_path, FakeSlam()), runner(tmp_path, FakeSlam(), runs=3)  # Requirement.build checks its edge
+    built: list[float] = []
+    build = param_ref.module
+
+    def counted(ref, value: float):
+        built.append(value)
+        return build(ref, value)
+
+    monkeypatch.setattr(param_ref, "module", counted)
+    outcome = search_outcome(room, room.requirement, SearchSettings(max_trials=4), "test_room")
+    assert built == [t.value for t in outcome.trials] and len(outcome.trials) == 4  # the edge first: checked, keyed, run
+    built.clear()
+    noisy.add_runs(Trial(value=30.0, passed=False), 3)  # three runs at once, each with its key
+    assert noisy.cached(30.0) and built == [30.0]

@@ -57,7 +57,7 @@ def test_yaml_max_iters_and_max_trials_together_is_a_config_error(tmp_path: Path
 def test_yaml_max_trials_reaches_the_search_as_sal_require_max_trials(tmp_path: Path) -> None:
     config = load_config(write(tmp_path, boundary_block(tmp_path, max_trials=5)))
     search = prepare_boundary_search(config, FakeSlam(), use_cache=False)
-    assert search.requirement.options["max_trials"] == 5
+    assert search.search.requirement.options["max_trials"] == 5
 
 
 # -- the tolerance -------------------------------------------------------------------------------
@@ -85,7 +85,7 @@ def test_the_same_tolerance_means_the_same_in_the_decorator_yaml_and_ini(
     )
     assert config.robustness_boundary is not None
     yaml_search = prepare_boundary_search(config, FakeSlam(), use_cache=False)
-    assert search_tolerances(yaml_search.requirement.options, 10.0) == expected
+    assert search_tolerances(yaml_search.search.requirement.options, 10.0) == expected
     if isinstance(given, str):
         percent, deprecated = ini_tolerance_percent(given)
         assert deprecated is None and search_tolerances({}, percent) == expected

@@ -95,20 +95,20 @@ def _create_system(name: str, options: dict[str, Any]) -> SlamSystem:
 
 
 def _unit_text(search: BoundarySearch) -> str:
-    return f" {search.ref.unit}" if search.ref.unit else ""
+    return f" {search.search.ref.unit}" if search.search.ref.unit else ""
 
 
 def _print_setup(search: BoundarySearch) -> None:
     """The range searched, the system, the dataset and the requirement."""
-    rb, ref, system, clean = search.block, search.ref, search.system, search.clean
+    rb, ref, system, clean = search.block, search.search.ref, search.search.system, search.search.dataset
     unit = _unit_text(search)
     print(
         f"boundary    {rb.name}: {ref.label} in {rb.lower_bound:g} .. {rb.upper_bound:g}{unit} (gets worse {ref.param.worse}), "
-        f"tolerance {rb.tolerance_text(search.ref.unit)}, max_trials {rb.max_trials}"
+        f"tolerance {rb.tolerance_text(ref.unit)}, max_trials {rb.max_trials}"
     )
     print(f"system      {system.name} {json.dumps(system.options(), sort_keys=True)}, up to {search.max_runs} run(s) per trial")
     print(f"dataset     {search.config.dataset.type} {clean.name}: {len(clean)} frames, {clean.sensor}")
-    print(f"requirement {search.requirement}")
+    print(f"requirement {search.search.requirement}")
 
 
 def _step_printer(search: BoundarySearch) -> Callable[[Trial], None]:
@@ -117,13 +117,14 @@ def _step_printer(search: BoundarySearch) -> Callable[[Trial], None]:
     from pytest_sal.report.formatting import trial_line
     from pytest_sal.report.outcome_report import trial_metric_names
 
-    metrics = trial_metric_names([(c.metric.name, c.op, c.threshold) for c in search.requirement.criteria])
+    ref = search.search.ref
+    metrics = trial_metric_names([(c.metric.name, c.op, c.threshold) for c in search.search.requirement.criteria])
     count = 0
 
     def show(trial: Trial) -> None:
         nonlocal count
         count += 1
-        print(f"  step {count:2d}  {trial_line(trial, search.ref.label, search.ref.unit, metrics)}", flush=True)
+        print(f"  step {count:2d}  {trial_line(trial, ref.label, ref.unit, metrics)}", flush=True)
 
     return show
 
@@ -132,7 +133,7 @@ def _print_result(search: BoundarySearch, result: BoundaryResult) -> None:
     """The boundary found, the trials and runs it took against a linear sweep, the files written."""
     outcome = result.outcome
     print(
-        f"boundary    {search.ref.label} {outcome.boundary.text()} ({outcome.termination}); "
+        f"boundary    {search.search.ref.label} {outcome.boundary.text()} ({outcome.termination}); "
         f"{len(outcome.trials)} trials, {outcome.runs} runs ({outcome.cached_trials} trials cached) vs {search.sweep_trials} "
         f"for a linear sweep at {search.block.tolerance_step:g}{_unit_text(search)} steps; {outcome.confidence()}"
     )

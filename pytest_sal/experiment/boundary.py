@@ -38,9 +38,8 @@ from sal_adapters.common.textfiles import atomic_write_text
 if TYPE_CHECKING:  # numpy, OpenCV and the modules load when a search runs, not for `sal --help`
     from pytest_sal.engine.execution.executor import Executor
     from pytest_sal.engine.outcomes.outcome import Outcome, Trial
-    from pytest_sal.engine.requirements import Requirement
+    from pytest_sal.engine.search.requirement_search import Search
     from pytest_sal.store.trial_cache import ContentCache
-    from sal_adapters.sequence import Sequence
     from sal_modules.params import ParamRef
     from sal_wrappers.base import SlamSystem
 
@@ -97,25 +96,18 @@ class BoundarySearch:
 
     Attributes:
         config: the experiment config; ``block`` its ``robustness_boundary`` block.
-        system: the SLAM system searched.
-        ref: the searched parameter; ``requirement`` what each trial is judged by.
-        clean: the clean sequence.
+        search: what is searched (the clean sequence, the parameter, the system, the
+            requirement each trial is judged by, the seed, runs and timeout), for ``run_search``.
         folder: where the summary, the plot and the runs' files go.
         max_runs: the most runs per trial (``RunPolicy``: above 1, the system is noisy).
-        runs, timeout, cache: as ``TrialRunner`` takes them (runs per trial, seconds per run,
-            the trial cache or ``None``).
+        cache: the trial cache, or ``None``.
     """
 
     config: ExperimentConfig
     block: BoundaryConfig
-    system: SlamSystem
-    ref: ParamRef
-    requirement: Requirement
-    clean: Sequence
+    search: Search
     folder: Path
     max_runs: int
-    runs: int | None
-    timeout: float | None
     cache: ContentCache | None
 
     @property
@@ -148,8 +140,10 @@ def prepare_boundary_search(
     (``runs``: the most runs per trial, ``None``: 1 for a deterministic system, else
     ``NOISY_RUNS``; ``timeout``: seconds per run; the trial cache at ``cache_dir``, default
     ``.sal/cache``, unless ``use_cache`` is false)."""
+    from pytest_sal.analysis.kitti_segments import KITTI_SEGMENTS_M
     from pytest_sal.engine.execution.trial_runner import RunPolicy
     from pytest_sal.engine.requirements import Requirement, ate_rmse, tracking_rate
+    from pytest_sal.engine.search.requirement_search import Search
     from pytest_sal.store.trial_cache import command_cache
 
     rb = enabled_boundary(config)
@@ -168,11 +162,21 @@ def prepare_boundary_search(
         confidence=rb.confidence,
         max_runs=rb.max_runs,
     )
-    clean = build_sequence(config)
     folder = config.output_dir() / "robustness_boundary" / system.name / rb.name
+    search = Search(
+        build_sequence(config),
+        ref,
+        system,
+        requirement,
+        f"sal boundary {config.experiment.name}/{rb.name}",
+        runs=runs,
+        seed=config.experiment.seed,
+        timeout=timeout,
+        workdir=folder / "runs",
+        kitti_segments=config.evaluation.kitti_segments_m or KITTI_SEGMENTS_M,
+    )
     cache = command_cache(cache_dir) if use_cache else None
-    max_runs = RunPolicy.for_system(system, runs).max_runs
-    return BoundarySearch(config, rb, system, ref, requirement, clean, folder, max_runs, runs, timeout, cache)
+    return BoundarySearch(config, rb, search, folder, RunPolicy.for_system(system, runs).max_runs, cache)
 
 
 def run_boundary_search(
@@ -186,27 +190,9 @@ def run_boundary_search(
     added to it) and write its summary and, with ``plot`` (a function drawing
     an outcome as a PNG at a path), ``boundary_plot.png``; both replace the previous ones together.
     ``executor``: where the runs happen (``None``: here, one at a time)."""
-    from pytest_sal.analysis.kitti_metrics import KITTI_SEGMENTS_M
-    from pytest_sal.engine.execution.executor import LocalExecutor
-    from pytest_sal.engine.execution.trial_runner import TrialRunner
-    from pytest_sal.engine.search.requirement_search import SearchSettings, search_outcome
+    from pytest_sal.engine.search.requirement_search import run_search
 
-    config, rb = search.config, search.block
-    runner = TrialRunner(
-        search.clean,
-        search.ref,
-        search.system,
-        search.requirement,
-        runs=search.runs,
-        seed=config.experiment.seed,
-        cache=search.cache,
-        workdir=search.folder / "runs",
-        timeout=search.timeout,
-        progress=on_trial,
-        kitti_segments=config.evaluation.kitti_segments_m or KITTI_SEGMENTS_M,
-        executor=executor or LocalExecutor(),
-    )
-    outcome = search_outcome(runner, search.requirement, SearchSettings(), f"sal boundary {config.experiment.name}/{rb.name}")
+    outcome = run_search(search.search, search.cache, executor, on_trial)
     summary_path = search.folder / SUMMARY_FILE
     plot_path = search.folder / PLOT_FILE if plot is not None else None
     with Replacement() as outputs:  # the plot and the summary replace the previous search's together

@@ -52,7 +52,7 @@ from pytest_sal.engine.requirements import Requirement
 from pytest_sal.store.cache_keys import cache_key
 from pytest_sal.store.trial_cache import ContentCache
 from sal_adapters import Sequence
-from sal_modules import perturb
+from sal_modules import Perturbation, perturb
 from sal_modules.params import ParamRef
 from sal_wrappers import SlamSystem
 
@@ -189,9 +189,19 @@ class TrialRunner:
     def __post_init__(self) -> None:
         self.policy = RunPolicy.for_system(self.system, self.runs)
         self._progress_lock = threading.Lock()
+        self._modules: dict[float, Perturbation] = {}
+        self._modules_lock = threading.Lock()
         stoppable = self.early_stop and self.system.stoppable
         #: what stops this requirement's runs early (``None``: they run every frame)
         self.stop_rule = StopRule.of(self.requirement) if stoppable else None
+
+    def module(self, value: float) -> Perturbation:
+        """The module (or chain) at ``value``, built and validated once per value: the cache
+        keys, the run jobs and ``unchanged_frames`` share it."""
+        with self._modules_lock:
+            if value not in self._modules:
+                self._modules[value] = self.ref.module(value)
+            return self._modules[value]
 
     def key(self, value: float, number: int = 0, stop: StopRule | None = None) -> str:
         """Cache key of run ``number`` at ``value``; with ``stop``, of the run stopped by that rule."""
@@ -199,7 +209,7 @@ class TrialRunner:
         return cache_key(
             runner=RUNNER_VERSION,
             dataset=self.dataset.fingerprint,
-            module=self.ref.module(value).to_dict(),
+            module=self.module(value).to_dict(),
             seed=self.seed,
             system=self.system.identity(),
             run=number,
@@ -213,7 +223,7 @@ class TrialRunner:
         pixel moves by more than 1 grey level and fewer than 1 % of them move at all (fog at
         100 km in a 5 m room: 0.1 % by 1 level). Modules that work on the whole sequence at
         once (video coding) are not checked: it would cost a full encode."""
-        module = self.ref.module(value)
+        module = self.module(value)
         steps = getattr(module, "steps", (module,))
         if any(step.whole_sequence for step in steps):
             return None
@@ -339,7 +349,7 @@ class TrialRunner:
             value=value,
             label=f"{self.ref.label} = {value:g} {self.ref.unit}".rstrip(),
             dataset=self.dataset,
-            module=self.ref.module(value),
+            module=self.module(value),
             system=self.system,
             seed=self.seed,
             workdir=self.workdir,

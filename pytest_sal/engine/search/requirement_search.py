@@ -1,12 +1,17 @@
-"""From a requirement to an ``Outcome``: the search range and tolerance, the boundary search
-over trials (several at once where the executor has free workers), the verdict, the margin and
-the words a failed test shows."""
+"""From a requirement to an ``Outcome``: a ``Search`` (what one robustness test searches) run
+by ``run_search``, the one entry point of the plugin and of ``sal boundary``; the search range
+and tolerance, the boundary search over trials (several at once where the executor has free
+workers), the verdict, the margin and the words a failed test shows."""
 
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from pytest_sal.analysis.kitti_segments import KITTI_SEGMENTS_M
 from pytest_sal.engine.outcomes.outcome import Boundary, Outcome, Trial
 from pytest_sal.engine.requirements import InvalidRequirement, Requirement, SearchSettings
 from pytest_sal.engine.search.bisection import SearchResult, SearchSpace, boundary_search
@@ -14,9 +19,92 @@ from pytest_sal.engine.tolerance import search_tolerances
 from sal_modules.params import ParamRef
 
 if TYPE_CHECKING:  # the plugin reads SearchSettings at configure time, before any trial runs
+    from pytest_sal.engine.execution.executor import Executor
+    from pytest_sal.engine.execution.trial_runner import TrialRunner
+    from pytest_sal.store.trial_cache import ContentCache
+    from sal_adapters import Sequence
+    from sal_wrappers import SlamSystem
+
+__all__ = [
+    "Search",
+    "SearchSettings",
+    "deterministic_search",
+    "failure_message",
+    "run_search",
+    "search_outcome",
+    "search_space",
+    "search_width",
+    "single_outcome",
+]
+
+
+@dataclass(frozen=True)
+class Search:
+    """What one robustness test searches, as a value: built by the plugin (``SalSession``) and
+    by ``sal boundary`` (``prepare_boundary_search``), run by ``run_search``.
+
+    Attributes:
+        dataset: the clean sequence; ``ref`` the searched parameter (values in its unit);
+            ``system`` the SLAM system; ``requirement`` what each run is judged by.
+        test_id: who asked (the pytest node id, ``sal boundary <experiment>/<name>``).
+        settings: the defaults the requirement may override (tolerance, budgets, reliability).
+        point: one value to try (``sal.sweep`` level, ``sal.at``); ``None``: search the envelope.
+        runs, seed, timeout, workdir, artifacts, cache_frames, kitti_segments, early_stop: the
+            trials' settings, as ``TrialRunner`` takes them.
+        warm_start: the previous boundary, tried after the edge (``history.regression.warm_start``).
+        earlier: a noisy system's trials of the same family run earlier (their runs count).
+    """
+
+    dataset: Sequence
+    ref: ParamRef
+    system: SlamSystem
+    requirement: Requirement
+    test_id: str
+    settings: SearchSettings = field(default_factory=SearchSettings)
+    point: float | None = None
+    runs: int | None = None
+    seed: int = 0
+    timeout: float | None = 600.0
+    workdir: Path = Path(".")
+    artifacts: bool = False
+    cache_frames: bool = False
+    kitti_segments: tuple[float, ...] = KITTI_SEGMENTS_M
+    early_stop: bool = True
+    warm_start: tuple[float | None, float | None] | None = None
+    earlier: tuple[Trial, ...] = ()
+
+
+def run_search(
+    search: Search, cache: ContentCache | None, executor: Executor | None = None, progress: Callable[[Trial], None] | None = None
+) -> Outcome:
+    """The outcome of ``search``: its boundary search, or its one ``point``, with runs read from
+    and stored in ``cache`` (``None``: none) and run by ``executor`` (``None``: here, one at a
+    time); ``progress`` is called with each trial as runs are added to it. The one place a
+    ``TrialRunner`` is built outside the tests."""
+    from pytest_sal.engine.execution.executor import LocalExecutor
     from pytest_sal.engine.execution.trial_runner import TrialRunner
 
-__all__ = ["SearchSettings", "failure_message", "run_search", "search_outcome", "search_space", "search_width", "single_outcome"]
+    runner = TrialRunner(
+        search.dataset,
+        search.ref,
+        search.system,
+        search.requirement,
+        runs=search.runs,
+        seed=search.seed,
+        cache=cache,
+        workdir=search.workdir,
+        timeout=search.timeout,
+        artifacts=search.artifacts,
+        cache_frames=search.cache_frames,
+        progress=progress,
+        kitti_segments=search.kitti_segments,
+        executor=executor or LocalExecutor(),
+        early_stop=search.early_stop,
+    )
+    earlier = list(search.earlier)
+    if search.point is not None:
+        return single_outcome(runner, search.requirement, search.test_id, search.point, search.settings, earlier)
+    return search_outcome(runner, search.requirement, search.settings, search.test_id, search.warm_start, earlier)
 
 
 def search_space(ref: ParamRef, search_range: tuple[float, float] | None = None) -> SearchSpace:
@@ -34,7 +122,7 @@ def search_width(runner: TrialRunner) -> int:
     return max(1, runner.executor.slots(runner.system))
 
 
-def run_search(
+def deterministic_search(
     runner: TrialRunner,
     requirement: Requirement,
     settings: SearchSettings,
@@ -91,12 +179,13 @@ def search_outcome(
     warm_start: tuple[float | None, float | None] | None = None,
     earlier: list[Trial] | None = None,
 ) -> Outcome:
-    """Run the boundary search of ``requirement`` with ``runner`` and describe what it found
-    (a noisy system's: the curve of its chance to hold, ``reliability_outcome``, which also
-    counts the runs of ``earlier`` trials of the session)."""
+    """Run the boundary search of ``requirement`` with ``runner`` (``run_search`` builds it; a
+    test may give its own) and describe what it found (a noisy system's: the curve of its
+    chance to hold, ``reliability_outcome``, which also counts the runs of ``earlier`` trials
+    of the session)."""
     if runner.policy.noisy:
         return _noisy_outcome(runner, requirement, settings, test_id, requirement.envelope.value, earlier=earlier)  # type: ignore[union-attr]
-    result = run_search(runner, requirement, settings, warm_start)
+    result = deterministic_search(runner, requirement, settings, warm_start)
     verdict = "passed" if result.edge_passed else "failed"
     boundary = Boundary(result.pass_value, result.fail_value, runner.ref.unit)
     trials = [point.info for point in result.trials]
