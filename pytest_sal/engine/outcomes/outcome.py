@@ -14,26 +14,25 @@ looked up by one rule, ``Outcome.trial_at``.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import asdict, dataclass, field
 from typing import Any, NoReturn
 
+from pytest_sal.analysis.metrics import AGGREGATED, aggregate
 from pytest_sal.engine.outcomes.json_shape import nesting_problem, read_fields
 from pytest_sal.engine.outcomes.legacy_units import upgrade_outcome
 from pytest_sal.engine.outcomes.quantity import num, with_unit
+from pytest_sal.engine.outcomes.run_record import RunRecord
 from sal_adapters.common.suggest import suggestion
 
-__all__ = ["TRIAL_METRICS", "Boundary", "Outcome", "Trial", "TrialMetrics", "failures_first"]
-
-#: Metrics aggregated over runs (median) into a trial's metrics.
-TRIAL_METRICS = ("ate_rmse", "rpe_trans", "rpe_rot", "t_rel", "r_rel", "tracking_rate", "scale_error", "first_tracked", "maps")
+__all__ = ["Boundary", "Outcome", "Trial", "TrialMetrics", "failures_first"]
 
 
 class TrialMetrics(dict[str, Any]):
     """A trial's metrics, read like ``RunMetrics`` or like the dict they are stored as.
 
     ``m.ate_rmse == m["ate_rmse"]`` (m), ``m.get(name)``, ``name in m``, ``m.items()``; equal to a
-    dict with the same items and written to JSON as one. A metric of ``TRIAL_METRICS`` a trial
+    dict with the same items and written to JSON as one. A metric of ``AGGREGATED`` a trial
     lacks (no run tracked, an older history) reads as ``None``; an unknown name is an
     ``AttributeError`` (``KeyError`` for ``m[name]``) with the closest name or the known ones.
     Read-only: a trial's metrics are its runs' medians (``TrialMetrics({**m, "maps": 2})`` for
@@ -43,7 +42,7 @@ class TrialMetrics(dict[str, Any]):
     __slots__ = ()
 
     def __missing__(self, name: str) -> Any:
-        if name in TRIAL_METRICS:
+        if name in AGGREGATED:
             return None
         raise KeyError(self._unknown(name))
 
@@ -56,13 +55,22 @@ class TrialMetrics(dict[str, Any]):
             raise AttributeError(self._unknown(name)) from None
 
     def __dir__(self) -> list[str]:
-        return sorted({*super().__dir__(), *TRIAL_METRICS, *(k for k in self if k.isidentifier())})
+        return sorted({*super().__dir__(), *AGGREGATED, *(k for k in self if k.isidentifier())})
+
+    @classmethod
+    def of(cls, runs: Iterable[Mapping[str, Any]]) -> TrialMetrics:
+        """The metrics of a trial with ``runs``: the median of each metric of ``AGGREGATED``
+        (``analysis.metrics.aggregate``, with its rule for a metric runs lack), ``failures`` (the
+        runs' reasons) and ``kitti_missing`` (why ``t_rel`` / ``r_rel`` are missing)."""
+        summary = aggregate(list(runs))
+        medians = {name: summary[name]["median"] for name in AGGREGATED}
+        return cls(medians, failures=summary["failure_reasons"], kitti_missing=summary["kitti_missing"])
 
     def __reduce__(self) -> tuple[type, tuple[dict[str, Any]]]:
         return TrialMetrics, (dict(self),)
 
     def _unknown(self, name: str) -> str:
-        return f"trial metrics have no {name!r}" + suggestion(name, [*TRIAL_METRICS, *self], "metrics")
+        return f"trial metrics have no {name!r}" + suggestion(name, [*AGGREGATED, *self], "metrics")
 
     def _read_only(self, *args: Any, **kwargs: Any) -> NoReturn:
         raise TypeError(
@@ -84,8 +92,8 @@ class Trial:
             ``first_tracked``, ``maps`` (``None`` where not available; ``kitti_missing`` says
             why ``t_rel`` / ``r_rel`` are), as ``TrialMetrics`` (``metrics.ate_rmse`` or
             ``metrics["ate_rmse"]``; a dict given is wrapped).
-        runs: per-run metrics (``RunMetrics.to_dict()``), failure reasons included, with
-            ``passed`` (that run met every criterion) and ``cached``.
+        runs: the runs, judged (``RunRecord``: ``run["ate_rmse"]``, ``run["passed"]``, ...;
+            mappings given are read with ``RunRecord.from_dict``).
         cached: every run came from the cache (no SLAM run).
         wall_time_s: time spent on this trial (s), perturbing and SLAM included.
         failed: the criteria that did not hold on the median metrics, in words.
@@ -98,7 +106,7 @@ class Trial:
     value: float
     passed: bool
     metrics: TrialMetrics = field(default_factory=TrialMetrics)
-    runs: list[dict[str, Any]] = field(default_factory=list)
+    runs: tuple[RunRecord, ...] = ()
     cached: bool = False
     wall_time_s: float = 0.0
     failed: list[str] = field(default_factory=list)
@@ -108,6 +116,8 @@ class Trial:
     def __setattr__(self, name: str, value: Any) -> None:
         if name == "metrics" and not isinstance(value, TrialMetrics):
             value = TrialMetrics(value)
+        if name == "runs":
+            value = tuple(run if isinstance(run, RunRecord) else RunRecord.from_dict(run) for run in value)
         super().__setattr__(name, value)
 
     @property
@@ -146,7 +156,7 @@ class Trial:
         text = f"{self.passes} of {self.voting} run{'s' if self.voting != 1 else ''} held"
         if self.abstained:
             text += f" ({self.abstained} starved by the machine, not counted)"
-        kinds: dict[str, list[dict[str, Any]]] = {}
+        kinds: dict[str, list[RunRecord]] = {}
         for run in failed:
             kinds.setdefault(_failure_kind(run), []).append(run)
         parts = []
@@ -285,7 +295,7 @@ class Boundary:
         return f"{'>' if severe_below else '<'} {with_unit(self.fail_value, self.unit)} (never passed)"
 
 
-def _failure_kind(run: dict[str, Any]) -> str:
+def _failure_kind(run: RunRecord) -> str:
     """What kind of failure a failed run shows (``Trial.failure_summary``)."""
     if run.get("failure"):
         return f"failed: {str(run['failure']).split(';')[0][:80]}"
@@ -418,8 +428,8 @@ class Outcome:
 
     def to_dict(self) -> dict[str, Any]:
         data = dict(asdict(self), confidence=self.confidence())
-        for trial in data["trials"]:
-            trial["metrics"] = dict(trial["metrics"])  # plain JSON-ready dicts, as stored
+        for trial, data_trial in zip(self.trials, data["trials"]):
+            data_trial.update(metrics=dict(trial.metrics), runs=[run.to_dict() for run in trial.runs])  # plain JSON-ready dicts
         return data
 
     @classmethod
