@@ -61,7 +61,7 @@ def run_search(
     requirement: Requirement,
     settings: SearchSettings,
     warm_start: tuple[float | None, float | None] | None = None,
-) -> SearchResult:
+) -> SearchResult[Trial]:
     """The boundary search of ``requirement`` with ``runner`` (a deterministic system: one run
     a trial, every verdict final): a round's trials are evaluated in threads, as many as
     ``search_width`` allows; a trial left off the search path is marked ``Trial.speculative``."""
@@ -73,12 +73,8 @@ def run_search(
     max_trials = requirement.options.get("max_trials", settings.max_trials)
     _refuse_unchanged(runner, requirement)
 
-    def evaluate(value: float) -> tuple[bool, Trial]:
-        trial = runner.evaluate(value)
-        return trial.passed, trial
-
-    result = boundary_search(
-        evaluate,
+    return boundary_search(
+        runner.evaluate,
         space,
         envelope.value,
         tolerance,
@@ -88,9 +84,6 @@ def run_search(
         width=functools.partial(search_width, runner),
         cached=runner.cached,
     )
-    for point in result.trials:
-        point.info.speculative = point.speculative
-    return result
 
 
 def _refuse_unchanged(runner: TrialRunner, requirement: Requirement) -> None:
@@ -122,7 +115,7 @@ def search_outcome(
     result = run_search(runner, requirement, settings, warm_start)
     verdict = "passed" if result.edge_passed else "failed"
     boundary = Boundary(result.pass_value, result.fail_value, runner.ref.unit)
-    trials = [point.info for point in result.trials]
+    trials = result.trials
     return _outcome(runner, requirement, test_id, verdict, boundary, result.termination, trials, result.contradictions)
 
 
