@@ -1,19 +1,19 @@
 """Metrics of SLAM runs: ``evaluate`` scores one ``RunResult`` against the ground truth
 (ATE, RPE, scale error from ``pytest_sal.analysis.trajectory_errors``, KITTI's ``t_rel`` /
 ``r_rel`` from ``pytest_sal.analysis.kitti_metrics``, tracking figures from the run itself)
-into a ``RunMetrics``; ``aggregate`` summarises many runs, with one rule for a metric some runs
-lack (``summary``): the one aggregation of run metrics, a trial's medians included.
+into a ``RunMetrics``; ``aggregate`` (``pytest_sal.analysis.aggregation``, exported here too)
+summarises many runs.
 """
 
 from __future__ import annotations
 
-import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
+from pytest_sal.analysis.aggregation import AGGREGATED, aggregate
 from pytest_sal.analysis.kitti_metrics import kitti_from_ate
 from pytest_sal.analysis.kitti_segments import KITTI_SEGMENTS_M, segment_lengths
 from pytest_sal.analysis.trajectory_errors import MIN_POSES, Align, AteResult, RpeResult, RpeUnit, ate, rpe, scale_error
@@ -21,10 +21,7 @@ from sal_adapters.common.errors import SalError
 from sal_adapters.trajectory import Trajectory
 from sal_wrappers.base import WRITTEN_BEFORE_FAILURE, RunResult
 
-__all__ = ["AGGREGATED", "MAX_POSITION_M", "RunMetrics", "aggregate", "evaluate", "summary"]
-
-#: ``RunMetrics`` fields that ``aggregate`` summarises (a trial's metrics are their medians)
-AGGREGATED = ("ate_rmse", "rpe_trans", "rpe_rot", "t_rel", "r_rel", "tracking_rate", "scale_error", "first_tracked", "maps", "matched")
+__all__ = ["AGGREGATED", "MAX_POSITION_M", "RunMetrics", "aggregate", "evaluate"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -169,35 +166,6 @@ def evaluate(
         failure=result.failure,
         ate=absolute,
     )
-
-
-def summary(values: Iterable[Any]) -> dict[str, Any]:
-    """One metric over runs: ``median``, ``mean``, ``min``, ``max``, ``count`` and ``values``
-    (the known ones). The rule for a missing value: ``None`` or not finite is missing, and a
-    metric missing in half the runs or more has no statistics (``None``): a run that crashed
-    or tracked nothing counts against it."""
-    given = list(values)
-    known = [float(v) for v in given if v is not None and math.isfinite(float(v))]
-    stats: dict[str, Any] = dict.fromkeys(("median", "mean", "min", "max"))
-    if known and 2 * len(known) > len(given):
-        a = np.asarray(known)
-        stats = {"median": float(np.median(a)), "mean": float(a.mean()), "min": float(a.min()), "max": float(a.max())}
-    return {**stats, "count": len(known), "values": known}
-
-
-def aggregate(runs: Sequence[RunMetrics | Mapping[str, Any]]) -> dict[str, Any]:
-    """Summary over runs (``RunMetrics``, or their ``to_dict()`` as a trial's runs hold them):
-    ``runs``, ``failures`` (how many have one), ``failure_reasons``, ``kitti_missing`` (why
-    ``t_rel`` / ``r_rel`` are missing, the first run's reason, when they are) and, per metric of
-    ``AGGREGATED``, its ``summary``."""
-    rows = [r.to_dict() if isinstance(r, RunMetrics) else r for r in runs]
-    out: dict[str, Any] = {"runs": len(rows), "failure_reasons": [r["failure"] for r in rows if r.get("failure")]}
-    out["failures"] = sum(1 for r in rows if r.get("failure") is not None)
-    for name in AGGREGATED:
-        out[name] = summary(r.get(name) for r in rows)
-    missing = next((r["kitti_missing"] for r in rows if r.get("kitti_missing")), None)
-    out["kitti_missing"] = missing if out["t_rel"]["median"] is None else None
-    return out
 
 
 def _frame_rate(stamps: np.ndarray) -> float | None:

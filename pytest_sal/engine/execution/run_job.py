@@ -29,7 +29,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-from pytest_sal.analysis.metrics import AGGREGATED, RunMetrics, evaluate
+from pytest_sal.analysis.aggregation import AGGREGATED
+from pytest_sal.analysis.metrics import RunMetrics, evaluate
 from pytest_sal.engine.execution.early_stop import StopRule
 from pytest_sal.engine.outcomes.run_record import RunRecord
 from pytest_sal.store.trial_cache import ContentCache

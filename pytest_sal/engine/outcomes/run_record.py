@@ -19,7 +19,7 @@ from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Any
 
-from pytest_sal.analysis.metrics import AGGREGATED
+from pytest_sal.analysis.aggregation import AGGREGATED
 
 __all__ = ["RunRecord"]
 

@@ -10,7 +10,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, NoReturn
 
-from pytest_sal.analysis.metrics import AGGREGATED, aggregate
+from pytest_sal.analysis.aggregation import AGGREGATED, aggregate
 from pytest_sal.engine.outcomes.run_record import RunRecord
 from sal_adapters.common.suggest import suggestion
 
