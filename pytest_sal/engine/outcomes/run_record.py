@@ -61,9 +61,12 @@ class RunRecord(Mapping[str, Any]):
     @cached_property
     def _view(self) -> dict[str, Any]:
         """The run as a mapping (``to_dict``)."""
-        view = dict(self.metrics)
-        if self.passed is not None:
-            view.update(passed=self.passed, abstained=self.abstained, cached=self.cached)
+        view, judged = dict(self.metrics), self.passed is not None
+        if judged:
+            view["passed"] = self.passed
+        for name in ("abstained", "cached"):  # a run read back unjudged keeps what it said
+            if judged or getattr(self, name):
+                view[name] = getattr(self, name)
         if self.not_cached is not None:
             view["not_cached"] = self.not_cached
         return view
@@ -79,7 +82,7 @@ class RunRecord(Mapping[str, Any]):
 
     def to_dict(self) -> dict[str, Any]:
         """The run in an outcome's JSON: its metrics with ``passed``, ``abstained``, ``cached``
-        (once judged) and ``not_cached`` (when given), flat."""
+        (once judged; else those that are true) and ``not_cached`` (when given), flat."""
         return dict(self._view)
 
     @classmethod
