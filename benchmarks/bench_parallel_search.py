@@ -32,9 +32,10 @@ from typing import Any
 
 from pytest_sal import tracking_rate
 from pytest_sal.engine.execution.executor import Executor
-from pytest_sal.engine.execution.run_job import RunJob, RunOutput
+from pytest_sal.engine.execution.run_job import RunJob
 from pytest_sal.engine.execution.trial_runner import TrialRunner
 from pytest_sal.engine.outcomes.outcome import Boundary
+from pytest_sal.engine.outcomes.run_record import RunRecord
 from pytest_sal.engine.requirements import Requirement
 from pytest_sal.engine.search.requirement_search import SearchSettings, deterministic_search
 from pytest_sal.testing import InProcessSlots, SleepySlam
@@ -52,7 +53,7 @@ class Capped(Executor):
     def slots(self, system: Any) -> int:
         return min(self.k, self.inner.slots(system))
 
-    def _run(self, job: RunJob) -> RunOutput:
+    def _run(self, job: RunJob) -> RunRecord:
         return self.inner.run(job)
 
 

@@ -24,7 +24,8 @@ from typing import Any
 import numpy as np
 
 from pytest_sal.engine.execution.executor import Executor
-from pytest_sal.engine.execution.run_job import RunJob, RunOutput, run_job
+from pytest_sal.engine.execution.run_job import RunJob, run_job
+from pytest_sal.engine.outcomes.run_record import RunRecord
 from sal_adapters import Sequence
 from sal_wrappers.base import RunResult, SlamSystem, StopCheck, TrackState
 
@@ -245,5 +246,5 @@ class InProcessSlots(Executor):
     def slots(self, system: SlamSystem) -> int:
         return self.k
 
-    def _run(self, job: RunJob) -> RunOutput:
+    def _run(self, job: RunJob) -> RunRecord:
         return run_job(job)

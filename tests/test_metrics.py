@@ -329,6 +329,11 @@ def test_aggregate_ignores_missing_values() -> None:
     assert summary["scale_error"] == {"median": None, "mean": None, "min": None, "max": None, "count": 0, "values": []}
     assert set(AGGREGATED) <= set(summary)
     assert aggregate([])["runs"] == 0
+    # one rule with a trial's medians: a metric missing in half the runs or more has no statistics
+    mostly_failed = aggregate([noisy[0], failed, failed])
+    assert mostly_failed["ate_rmse"] == {"median": None, "mean": None, "min": None, "max": None, "count": 1, "values": [ate_values[0]]}
+    assert mostly_failed["failure_reasons"] == ["timeout after 60 s"] * 2
+    assert aggregate([noisy[0].to_dict(), failed.to_dict()])["ate_rmse"]["median"] is None  # 1 of 2: not more than half
 
 
 def test_run_metrics_fields_are_json_ready() -> None:

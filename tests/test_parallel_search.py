@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 
 from pytest_sal import tracking_rate
 from pytest_sal.engine.execution.trial_runner import TrialRunner
-from pytest_sal.engine.outcomes.outcome import Outcome
+from pytest_sal.engine.outcomes.outcome import Outcome, Trial
 from pytest_sal.engine.requirements import Requirement
 from pytest_sal.engine.search.bisection import SearchResult, SearchSpace, _Search, boundary_search
 from pytest_sal.engine.search.requirement_search import SearchSettings, deterministic_search, search_outcome, search_width
@@ -43,11 +43,11 @@ class Case:
     max_trials: int
     warm_start: tuple[float | None, float | None] | None
 
-    def evaluate(self, value: float) -> tuple[bool, None]:
+    def evaluate(self, value: float) -> Trial:
         """Passes exactly on the mild side of ``boundary`` (the boundary itself passes)."""
-        return (not self.space.worse(value, self.boundary)), None
+        return Trial(value, not self.space.worse(value, self.boundary))
 
-    def search(self, width: Callable[[], int] | None = None) -> SearchResult:
+    def search(self, width: Callable[[], int] | None = None) -> SearchResult[Trial]:
         return boundary_search(
             self.evaluate,
             self.space,
@@ -86,12 +86,12 @@ def fixed(k: int) -> Callable[[], int]:
     return lambda: k
 
 
-def recording(asked: list[float], passes: Callable[[float], bool]) -> Callable[[float], tuple[bool, None]]:
+def recording(asked: list[float], passes: Callable[[float], bool]) -> Callable[[float], Trial]:
     """An evaluator that appends each value it is asked to ``asked``."""
 
-    def evaluate(value: float) -> tuple[bool, None]:
+    def evaluate(value: float) -> Trial:
         asked.append(value)
-        return passes(value), None
+        return Trial(value, passes(value))
 
     return evaluate
 
@@ -198,18 +198,18 @@ def test_hints_go_in_one_round() -> None:
     active, most = [0], [0]
     lock = threading.Lock()
 
-    def slow(value: float) -> tuple[bool, float]:
+    def slow(value: float) -> Trial:
         with lock:
             active[0] += 1
             most[0] = max(most[0], active[0])
         time.sleep(0.05)
         with lock:
             active[0] -= 1
-        return value >= 14.3, value
+        return Trial(value, value >= 14.3)
 
     space = SearchSpace(mild=30.0, severe=10.0)
 
-    def search(k: int) -> SearchResult:
+    def search(k: int) -> SearchResult[Trial]:
         return boundary_search(slow, space, 25, tolerance=1, max_trials=12, warm_start=(15.0, 13.0), width=fixed(k))
 
     sequential, parallel = search(1), search(2)

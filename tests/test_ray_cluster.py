@@ -18,9 +18,10 @@ from ray_clusters import listening_addresses, ray_environment, session_processes
 from pytest_sal import tracking_rate
 from pytest_sal.engine.execution.executor import Executor, LocalExecutor
 from pytest_sal.engine.execution.ray_executor import RayExecutor
-from pytest_sal.engine.execution.run_job import RunJob, RunOutput
+from pytest_sal.engine.execution.run_job import RunJob
 from pytest_sal.engine.execution.trial_runner import TrialRunner
 from pytest_sal.engine.outcomes.outcome import Outcome, Trial
+from pytest_sal.engine.outcomes.run_record import RunRecord
 from pytest_sal.engine.requirements import Requirement
 from pytest_sal.engine.search.requirement_search import SearchSettings, search_outcome
 from pytest_sal.store.trial_cache import ContentCache
@@ -73,7 +74,7 @@ class Spy(Executor):
         self.inner = inner
         self.workers: list[str] = []
 
-    def _run(self, job: RunJob) -> RunOutput:
+    def _run(self, job: RunJob) -> RunRecord:
         output = self.inner.run(job)
         self.workers.append(output.worker)
         return output

@@ -221,7 +221,7 @@ def test_the_worker_runs_the_controllers_code(executor: RayExecutor, tmp_path: P
     output = executor.run(fake_job(LostWorkerSlam(str(tmp_path / "no-switch")), tmp_path))
     assert output.result["info"]["code"] == pytest_sal.testing.__file__  # this checkout's, not an installed copy
     assert output.worker.split(":")[0] and " on Ray node " in output.worker and output.worker.endswith("(127.0.0.1)")
-    assert output.record["metrics"]["tracking_rate"] == 0.5
+    assert output.metrics["tracking_rate"] == 0.5
 
 
 def fake_job(system: SlamSystem, workdir: Path) -> RunJob:
@@ -277,7 +277,7 @@ def test_another_process_submits_to_the_same_ray_by_its_address(executor: RayExe
                      module=fog(visibility_m=20.0), system=FakeSlam(), seed=0, workdir=__import__("pathlib").Path(sys.argv[2]),
                      timeout=60.0, kitti_segments=(100.0,))
         output = shared.run(job)
-        print(shared.describe(), output.record["metrics"]["tracking_rate"], output.worker)
+        print(shared.describe(), output.metrics["tracking_rate"], output.worker)
         shared.close()
         """
     )

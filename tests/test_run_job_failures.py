@@ -11,10 +11,11 @@ import pytest
 from kitti_excerpt import kitti_copy
 
 from pytest_sal import tracking_rate
+from pytest_sal.analysis.metrics import AGGREGATED
 from pytest_sal.engine.execution.executor import Executor, LocalExecutor
-from pytest_sal.engine.execution.run_job import RunJob, RunOutput, check_readable, failed_output
-from pytest_sal.engine.execution.trial_runner import TrialRunner, run_record_problem
-from pytest_sal.engine.outcomes.outcome import TRIAL_METRICS
+from pytest_sal.engine.execution.run_job import RunJob, check_readable, failed_output
+from pytest_sal.engine.execution.trial_runner import TrialRunner
+from pytest_sal.engine.outcomes.run_record import RunRecord
 from pytest_sal.engine.requirements import Requirement
 from pytest_sal.store.trial_cache import ContentCache
 from pytest_sal.testing import FakeSlam
@@ -30,7 +31,7 @@ class WorkerLost(Executor):
 
     name = "lost"
 
-    def _run(self, job: RunJob) -> RunOutput:
+    def _run(self, job: RunJob) -> RunRecord:
         return failed_output(job, LOST, LOST)
 
 
@@ -54,7 +55,7 @@ def test_a_lost_run_fails_with_its_reason_and_is_never_cached(tmp_path: Path) ->
     (run,) = trial.runs
     assert not trial.passed and run["failure"] == LOST and run["not_cached"] == LOST
     assert run["tracking_rate"] == 0.0 and run["ate_rmse"] is None and not run["cached"]
-    assert all(name in run for name in TRIAL_METRICS)
+    assert all(name in run for name in AGGREGATED)
     assert ContentCache(tmp_path / "cache").get(runner.key(40.0)) is None
     again = trial_runner(dataset, tmp_path, LocalExecutor()).run_trial(40.0)  # the next session runs it
     assert again.passed and not again.cached
@@ -77,10 +78,10 @@ def test_the_failed_record_is_a_complete_run_record(tmp_path: Path) -> None:
         timeout=10.0,
         kitti_segments=(100.0,),
     )
-    output = failed_output(job, "no result", None)
-    assert run_record_problem(output.record) is None and "not_cached" not in output.record
-    assert output.record["value"] == 30.0 and output.record["module"] == fog(visibility_m=30.0).to_dict()
-    assert output.result["states"] == ["not_initialised"] * 5 and output.result["failure"] == "no result"
+    record = failed_output(job, "no result", None)
+    assert RunRecord.entry_problem(record.entry()) is None and "not_cached" not in record.entry()
+    assert record.value == 30.0 and record.module == fog(visibility_m=30.0).to_dict()
+    assert record.result["states"] == ["not_initialised"] * 5 and record.result["failure"] == "no result"
 
 
 def test_a_dataset_the_worker_cannot_read_names_the_path_and_the_worker(shared_data: Path, tmp_path: Path) -> None:

@@ -10,6 +10,7 @@ import pytest
 import pytest_sal as sal
 from pytest_sal import InvalidRequirement, ate_rmse, tracking_rate
 from pytest_sal.engine.execution.trial_runner import NOISY_RUNS, RunPolicy
+from pytest_sal.engine.outcomes.outcome import Trial
 from pytest_sal.engine.requirements import Requirement
 from pytest_sal.engine.search.bisection import SearchSpace, boundary_search
 from pytest_sal.testing import FakeSlam
@@ -22,9 +23,9 @@ def threshold_system(boundary: float, worse_lower: bool = True):
     """Passes exactly on the mild side of ``boundary``; records what it was asked."""
     asked: list[float] = []
 
-    def evaluate(value: float) -> tuple[bool, None]:
+    def evaluate(value: float) -> Trial:
         asked.append(value)
-        return (value >= boundary if worse_lower else value <= boundary), None
+        return Trial(value, value >= boundary if worse_lower else value <= boundary)
 
     return evaluate, asked
 
@@ -46,9 +47,9 @@ def test_a_failing_edge_bisects_toward_the_mild_end() -> None:
 
 
 def test_not_bracketed_when_the_far_end_agrees_with_the_edge() -> None:
-    result = boundary_search(lambda v: (True, None), FOG, edge=25, tolerance=2)
+    result = boundary_search(lambda v: Trial(v, True), FOG, edge=25, tolerance=2)
     assert result.termination == "not_bracketed" and result.pass_value == 1.0 and result.fail_value is None
-    result = boundary_search(lambda v: (False, None), FOG, edge=25, tolerance=2)
+    result = boundary_search(lambda v: Trial(v, False), FOG, edge=25, tolerance=2)
     assert result.termination == "not_bracketed" and result.fail_value == 100_000.0 and result.pass_value is None
 
 
@@ -84,7 +85,7 @@ def test_geometric_bisection_over_decades() -> None:
 
 def test_contradictions_are_reported() -> None:
     # passes at 25 m and (oddly) at 10 m, fails at 15 m: the warm start visits both
-    result = boundary_search(lambda v: (v >= 20 or v == 10, None), FOG, edge=25, tolerance=2, max_trials=6, warm_start=(10.0, 15.0))
+    result = boundary_search(lambda v: Trial(v, v >= 20 or v == 10), FOG, edge=25, tolerance=2, max_trials=6, warm_start=(10.0, 15.0))
     assert "10 passed but the milder 15 failed" in result.contradictions
 
 

@@ -9,8 +9,8 @@ import numpy as np
 
 from pytest_sal import tracking_rate
 from pytest_sal.engine.execution.run_job import cached_sequence
-from pytest_sal.engine.execution.trial_runner import TrialRunner, aggregate_metrics
-from pytest_sal.engine.outcomes.outcome import Trial
+from pytest_sal.engine.execution.trial_runner import TrialRunner
+from pytest_sal.engine.outcomes.outcome import Trial, TrialMetrics
 from pytest_sal.engine.requirements import Requirement
 from pytest_sal.store.trial_cache import ContentCache
 from pytest_sal.testing import FakeSlam, applied_value
@@ -31,7 +31,7 @@ def test_median_over_runs_and_a_metric_missing_in_most_runs_is_missing() -> None
         {"ate_rmse": 3.0, "tracking_rate": None},
         {"ate_rmse": 2.0, "tracking_rate": None, "failure": "killed by SIGSEGV"},
     ]
-    metrics = aggregate_metrics(runs)
+    metrics = TrialMetrics.of(runs)
     assert metrics["ate_rmse"] == 2.0 and metrics["tracking_rate"] is None
     assert metrics["failures"] == ["killed by SIGSEGV"]
 

@@ -1,7 +1,8 @@
 """Metrics of SLAM runs: ``evaluate`` scores one ``RunResult`` against the ground truth
 (ATE, RPE, scale error from ``pytest_sal.analysis.trajectory_errors``, KITTI's ``t_rel`` /
 ``r_rel`` from ``pytest_sal.analysis.kitti_metrics``, tracking figures from the run itself)
-into a ``RunMetrics``; ``aggregate`` summarises many runs.
+into a ``RunMetrics``; ``aggregate`` (``pytest_sal.analysis.aggregation``, exported here too)
+summarises many runs.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from pytest_sal.analysis.aggregation import AGGREGATED, aggregate
 from pytest_sal.analysis.kitti_metrics import kitti_from_ate
 from pytest_sal.analysis.kitti_segments import KITTI_SEGMENTS_M, segment_lengths
 from pytest_sal.analysis.trajectory_errors import MIN_POSES, Align, AteResult, RpeResult, RpeUnit, ate, rpe, scale_error
@@ -20,9 +22,6 @@ from sal_adapters.trajectory import Trajectory
 from sal_wrappers.base import WRITTEN_BEFORE_FAILURE, RunResult
 
 __all__ = ["AGGREGATED", "MAX_POSITION_M", "RunMetrics", "aggregate", "evaluate"]
-
-#: ``RunMetrics`` fields that ``aggregate`` summarises
-AGGREGATED = ("ate_rmse", "rpe_trans", "rpe_rot", "t_rel", "r_rel", "scale_error", "tracking_rate", "first_tracked", "maps", "matched")
 
 
 @dataclass(frozen=True, eq=False)
@@ -167,21 +166,6 @@ def evaluate(
         failure=result.failure,
         ate=absolute,
     )
-
-
-def aggregate(runs: list[RunMetrics]) -> dict[str, Any]:
-    """Summary over runs: ``runs``, ``failures`` and, per metric of ``AGGREGATED``,
-    ``{"median", "mean", "min", "max", "count", "values"}`` over the values that are not
-    ``None`` (the statistics are ``None`` when there is none)."""
-    out: dict[str, Any] = {"runs": len(runs), "failures": sum(1 for r in runs if r.failure is not None)}
-    for name in AGGREGATED:
-        values = [float(v) for v in (getattr(r, name) for r in runs) if v is not None]
-        a = np.asarray(values)
-        stats: dict[str, float | None] = dict.fromkeys(("median", "mean", "min", "max"))
-        if len(a):
-            stats = {"median": float(np.median(a)), "mean": float(a.mean()), "min": float(a.min()), "max": float(a.max())}
-        out[name] = {**stats, "count": len(values), "values": values}
-    return out
 
 
 def _frame_rate(stamps: np.ndarray) -> float | None:

@@ -1,7 +1,7 @@
 """Where runs happen: the executor seam.
 
 A ``TrialRunner`` hands every run that is not in the cache to an ``Executor`` as a ``RunJob``
-and gets a ``RunOutput`` back; the cache, the verdicts, the search and the history stay on the
+and gets a ``RunRecord`` back; the cache, the verdicts, the search and the history stay on the
 controller (the pytest session), so results of every executor are interchangeable and a cached
 run is never sent anywhere.
 
@@ -22,7 +22,8 @@ from __future__ import annotations
 import threading
 from typing import Any
 
-from pytest_sal.engine.execution.run_job import RunJob, RunOutput, run_job
+from pytest_sal.engine.execution.run_job import RunJob, run_job
+from pytest_sal.engine.outcomes.run_record import RunRecord
 from sal_adapters.common.errors import SalError
 from sal_wrappers import SlamSystem
 
@@ -51,9 +52,9 @@ class Executor:
         self.submitted = 0
         self._count_lock = threading.Lock()
 
-    def run(self, job: RunJob) -> RunOutput:
-        """Run ``job`` and wait for its output. Failures of the system come back in the output's
-        record; an exception means the run could not happen at all (a usage error)."""
+    def run(self, job: RunJob) -> RunRecord:
+        """Run ``job`` and wait for its record. Failures of the system come back in the record;
+        an exception means the run could not happen at all (a usage error)."""
         with self._count_lock:
             self.submitted += 1
         return self._run(job)
@@ -69,7 +70,7 @@ class Executor:
     def close(self) -> None:
         """Release what the executor holds (a Ray connection, a local Ray it started)."""
 
-    def _run(self, job: RunJob) -> RunOutput:
+    def _run(self, job: RunJob) -> RunRecord:
         raise NotImplementedError
 
     def __enter__(self) -> Executor:
@@ -84,5 +85,5 @@ class LocalExecutor(Executor):
 
     name = "local"
 
-    def _run(self, job: RunJob) -> RunOutput:
+    def _run(self, job: RunJob) -> RunRecord:
         return run_job(job)

@@ -61,7 +61,8 @@ from ray.exceptions import (
 )
 
 from pytest_sal.engine.execution.executor import Executor, ExecutorError
-from pytest_sal.engine.execution.run_job import RunJob, RunOutput, failed_output, run_job, worker_name
+from pytest_sal.engine.execution.run_job import RunJob, failed_output, run_job, worker_name
+from pytest_sal.engine.outcomes.run_record import RunRecord
 from sal_adapters.common.errors import SalError
 from sal_wrappers import SlamSystem
 
@@ -294,7 +295,7 @@ class RayExecutor(Executor):
         return options
 
     # -- runs ----------------------------------------------------------------------------------------
-    def _run(self, job: RunJob) -> RunOutput:
+    def _run(self, job: RunJob) -> RunRecord:
         self.connect()
         options = self._task_options(job.system)
         held = {"CPU": options["num_cpus"], "GPU": options["num_gpus"]}
@@ -308,7 +309,7 @@ class RayExecutor(Executor):
                 for kind, amount in held.items():
                     self._busy[kind] -= amount
 
-    def _submit(self, job: RunJob, options: dict[str, Any]) -> RunOutput:
+    def _submit(self, job: RunJob, options: dict[str, Any]) -> RunRecord:
         """Run ``job`` as a task with ``options`` and wait for it (see ``_run``)."""
         ref = _TASK.options(**options).remote(job)
         attempts = self.max_retries + 1
@@ -316,8 +317,8 @@ class RayExecutor(Executor):
         # for a place in the queue (a busy shared cluster)
         limit = None if job.timeout is None else (attempts + 1) * (job.timeout + RESULT_GRACE_S)
         try:
-            output: RunOutput = ray.get(ref, timeout=limit)
-            return output
+            record: RunRecord = ray.get(ref, timeout=limit)
+            return record
         except GetTimeoutError:
             ray.cancel(ref, force=True)
             reason = (
@@ -343,7 +344,7 @@ def _first_sentence(error: Exception, most: int = 160) -> str:
     return f"{type(error).__name__}: {text[:most]}"
 
 
-def _on_worker(job: RunJob) -> RunOutput:
+def _on_worker(job: RunJob) -> RunRecord:
     """The Ray task: run ``job`` on this worker, naming it and its Ray node."""
     node = ray.get_runtime_context().get_node_id()
     return run_job(job, worker=f"{worker_name()} on Ray node {node[:12]} ({ray.util.get_node_ip_address()})")

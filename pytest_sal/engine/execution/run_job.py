@@ -5,14 +5,14 @@ happens (this process, or a Ray worker on another machine), and what comes back.
 (pickled as its frame sources: image paths, or the synthetic world's class and seed), the
 perturbation configured at the trial's severity, the seed, the system, the timeout, the stop rule. ``run_job`` perturbs the
 sequence where it runs, runs the system (which keeps its own crash isolation: a segfault or a
-timeout is a failed run, never an exception) and scores the trajectory with evo. It returns a
-``RunOutput``: the run record the cache stores, the whole ``RunResult`` (states, trajectory,
-log tail), and the report images as PNG bytes. The controller writes those (``store_artifacts``) and the cache entry, so
+timeout is a failed run, never an exception) and scores the trajectory with evo. It returns the
+run's ``RunRecord`` with the whole ``RunResult`` (states, trajectory, log tail) and the report
+images as PNG bytes. The controller writes those (``store_artifacts``) and the cache entry, so
 nothing a remote worker wrote on its own disk is needed afterwards.
 
 The dataset is read where the run happens: ``check_readable`` first stats its folder and first
 and last frames there, so a worker that does not see it at the controller's path is one
-``DatasetError`` naming the worker and the path. ``failed_output`` is the output of a run that
+``DatasetError`` naming the worker and the path. ``failed_output`` is the record of a run that
 gave nothing back (a lost Ray worker): a run that tracked nothing, with its reason.
 """
 
@@ -22,16 +22,17 @@ import math
 import os
 import signal
 import socket
-from dataclasses import dataclass, field
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import cv2
 import numpy as np
 
+from pytest_sal.analysis.aggregation import AGGREGATED
 from pytest_sal.analysis.metrics import RunMetrics, evaluate
 from pytest_sal.engine.execution.early_stop import StopRule
-from pytest_sal.engine.outcomes.outcome import TRIAL_METRICS
+from pytest_sal.engine.outcomes.run_record import RunRecord
 from pytest_sal.store.trial_cache import ContentCache
 from sal_adapters import Sequence, Trajectory
 from sal_adapters.common.errors import DatasetError
@@ -40,7 +41,6 @@ from sal_wrappers import RunResult, SlamSystem, TrackState, machine_load
 
 __all__ = [
     "RunJob",
-    "RunOutput",
     "cached_sequence",
     "check_readable",
     "failed_output",
@@ -92,33 +92,14 @@ class RunJob:
     stop: StopRule | None = None
 
 
-@dataclass
-class RunOutput:
-    """What a run gives back.
-
-    Attributes:
-        record: the run record the cache stores: ``value``, ``module``, ``metrics`` (with
-            ``stopped``, why, when the run was stopped early) and, when the machine decided a
-            failure, ``not_cached`` (why it must not be stored).
-        result: the system's ``RunResult.to_dict()`` (states, trajectory, failure, log tail).
-        images: report images by name (``frame``, ``trajectory``), PNG bytes.
-        worker: where it ran (``host:pid``).
-    """
-
-    record: dict[str, Any]
-    result: dict[str, Any] = field(default_factory=dict)
-    images: dict[str, bytes] = field(default_factory=dict)
-    worker: str = ""
-
-
 def worker_name() -> str:
     """``host:pid`` of this process: where a run ran, in messages."""
     return f"{socket.gethostname()}:{os.getpid()}"
 
 
-def run_job(job: RunJob, worker: str | None = None) -> RunOutput:
+def run_job(job: RunJob, worker: str | None = None) -> RunRecord:
     """Perturb, run, score: one run of ``job`` in this process (the system may start its own child).
-    ``worker`` names where it runs, in messages and in the output (default ``worker_name()``)."""
+    ``worker`` names where it runs, in messages and in the record (default ``worker_name()``)."""
     worker = worker or worker_name()
     check_readable(job.dataset, worker)
     perturbed = job.dataset if job.module is None else perturb(job.dataset, job.module, seed=job.seed)
@@ -141,17 +122,16 @@ def run_job(job: RunJob, worker: str | None = None) -> RunOutput:
             images["trajectory"] = _trajectory_png(job, perturbed.name, groundtruth, scored.ate.estimate)
         if len(perturbed):
             images["frame"] = _example_frame_png(perturbed)
-    return RunOutput(record=record, result=result.to_dict(), images=images, worker=worker)
+    return replace(record, images=images, worker=worker)
 
 
-def failed_output(job: RunJob, failure: str, not_cached: str | None, worker: str = "") -> RunOutput:
-    """The output of a run of ``job`` that gave no result (its worker was lost, it never
+def failed_output(job: RunJob, failure: str, not_cached: str | None, worker: str = "") -> RunRecord:
+    """The record of a run of ``job`` that gave no result (its worker was lost, it never
     answered): every frame of the clean sequence NOT_INITIALISED, ``failure`` its reason, scored
-    like any run; ``not_cached`` (the machine's failure: the next session runs it again) goes
-    into the record when given."""
+    like any run; ``not_cached`` (the machine's failure: the next session runs it again) when given."""
     result = _not_initialised(job.system, job.dataset, failure)
     record, _ = _scored_record(job, result, job.dataset.groundtruth, not_cached)
-    return RunOutput(record=record, result=result.to_dict(), worker=worker)
+    return replace(record, worker=worker)
 
 
 def check_readable(dataset: Sequence, worker: str) -> None:
@@ -178,14 +158,12 @@ def _not_initialised(system: SlamSystem, sequence: Sequence, failure: str) -> Ru
     )
 
 
-def _scored_record(
-    job: RunJob, result: RunResult, groundtruth: Trajectory | None, not_cached: str | None
-) -> tuple[dict[str, Any], RunMetrics]:
-    """The run record of ``result`` scored against ``groundtruth`` (``value``, ``module``,
-    ``metrics``; ``not_cached`` when given), and the scores themselves."""
+def _scored_record(job: RunJob, result: RunResult, groundtruth: Trajectory | None, not_cached: str | None) -> tuple[RunRecord, RunMetrics]:
+    """The run record of ``result`` scored against ``groundtruth`` (``not_cached`` when given;
+    the whole ``result`` for the trip back), and the scores themselves."""
     scored = evaluate(result, groundtruth, kitti_segments=job.kitti_segments)
     metrics = scored.to_dict()
-    for name in TRIAL_METRICS:  # NaN judges like null, and a stored record holds no NaN
+    for name in AGGREGATED:  # NaN judges like null, and a stored record holds no NaN
         if metrics[name] is not None and not math.isfinite(metrics[name]):
             metrics[name] = None
     metrics["wall_time_s"] = result.wall_time_s
@@ -193,23 +171,22 @@ def _scored_record(
     metrics["load"] = result.load
     if result.stopped is not None:
         metrics["stopped"] = result.stopped
-    record: dict[str, Any] = {"value": job.value, "module": None if job.module is None else job.module.to_dict(), "metrics": metrics}
-    if not_cached is not None:
-        record["not_cached"] = not_cached
+    module = None if job.module is None else job.module.to_dict()
+    record = RunRecord(metrics, value=job.value, module=module, not_cached=not_cached, result=result.to_dict())
     return record, scored
 
 
-def store_artifacts(output: RunOutput, cache: ContentCache | None, key: str) -> dict[str, Any]:
-    """The run record of ``output`` with its report images written into ``cache``
-    (``ContentCache.put_artifact``) as ``<key>.png`` (the frame) and ``<key>-trajectory.png``,
-    named in ``artifacts`` (none when ``cache`` is ``None``, nor those it cannot write)."""
+def store_artifacts(record: RunRecord, cache: ContentCache | None, key: str) -> RunRecord:
+    """``record`` with its report images written into ``cache`` (``ContentCache.put_artifact``)
+    as ``<key>.png`` (the frame) and ``<key>-trajectory.png``, named in ``artifacts`` (none when
+    ``cache`` is ``None``, nor those it cannot write)."""
     artifacts: dict[str, str] = {}
     if cache is not None:
-        for name, data in sorted(output.images.items()):
+        for name, data in sorted(record.images.items()):
             path = cache.put_artifact(f"{key}.png" if name == "frame" else f"{key}-{name}.png", data)
             if path is not None:
                 artifacts[name] = str(path)
-    return {**output.record, "artifacts": artifacts}
+    return replace(record, artifacts=artifacts, images={})
 
 
 #: A timed-out run that had less than this share of one core over its wall time was stalled by

@@ -13,7 +13,7 @@ configured module (name, version, every parameter), the seed, the system's ident
 version, options, the content of the files it runs), the run's number and the runner version.
 An identical run in a later session, or in the other xdist worker, is read back instead of
 run again; a trial that needs more runs than were cached runs only the missing ones. A stored
-run whose record lacks what the judge reads (``run_record_problem``) is discarded and run again.
+run whose entry lacks what the judge reads (``RunRecord.entry_problem``) is discarded and run again.
 A run whose failure the machine decided (``run_job.machine_failure``: a timeout on a starved or
 oversubscribed machine, out of memory) counts in this session and is not stored, so the next
 session runs it again; its run says why under ``not_cached``.
@@ -30,8 +30,6 @@ stopped one under the rule's. Keys of full runs are those without early stop.
 from __future__ import annotations
 
 import functools
-import math
-import numbers
 import threading
 import time
 from collections.abc import Callable
@@ -47,7 +45,8 @@ from pytest_sal.analysis.kitti_metrics import KITTI_SEGMENTS_M
 from pytest_sal.engine.execution.early_stop import StopRule
 from pytest_sal.engine.execution.executor import Executor, LocalExecutor
 from pytest_sal.engine.execution.run_job import RunJob, store_artifacts
-from pytest_sal.engine.outcomes.outcome import TRIAL_METRICS, Trial, TrialMetrics
+from pytest_sal.engine.outcomes.outcome import Trial, TrialMetrics
+from pytest_sal.engine.outcomes.run_record import RunRecord
 from pytest_sal.engine.requirements import Requirement
 from pytest_sal.store.cache_keys import cache_key
 from pytest_sal.store.trial_cache import ContentCache
@@ -61,8 +60,6 @@ __all__ = [
     "RUNNER_VERSION",
     "RunPolicy",
     "TrialRunner",
-    "aggregate_metrics",
-    "run_record_problem",
 ]
 
 #: Bumped when a change here changes cached results (2: one cache entry per run; 3: entries
@@ -71,43 +68,6 @@ __all__ = [
 #: their key (issue 23), so entries of 4, which would each be refused with a warning, are left
 #: to eviction and ``sal cache clear``).
 RUNNER_VERSION = 5
-
-
-def aggregate_metrics(runs: list[dict[str, Any]]) -> dict[str, Any]:
-    """Median of each metric over the runs. A metric missing (``None``) in more than half of
-    the runs is ``None``: a run that crashed or tracked nothing counts against the trial.
-    ``kitti_missing``: why ``t_rel`` / ``r_rel`` are missing (the first run's reason)."""
-    out: dict[str, Any] = {}
-    for name in TRIAL_METRICS:
-        values = [r.get(name) for r in runs]
-        known = [float(v) for v in values if v is not None and math.isfinite(float(v))]
-        out[name] = float(np.median(known)) if known and 2 * len(known) > len(values) else None
-    out["failures"] = [r["failure"] for r in runs if r.get("failure")]
-    out["kitti_missing"] = next((r["kitti_missing"] for r in runs if r.get("kitti_missing")), None) if out["t_rel"] is None else None
-    return out
-
-
-def run_record_problem(record: dict[str, Any]) -> str | None:
-    """What a stored run record lacks for judging, in words (``None``: it can be used):
-    ``metrics`` holds every metric of ``TRIAL_METRICS`` as a finite number or null, ``failure``
-    as text or null and ``starved`` as a bool; ``artifacts``, when present, maps names to paths."""
-    metrics = record.get("metrics")
-    if not isinstance(metrics, dict):
-        return "no 'metrics' object"
-    for name in TRIAL_METRICS:
-        if name not in metrics:
-            return f"metrics.{name} is missing"
-        value = metrics[name]
-        if value is not None and (not isinstance(value, numbers.Real) or isinstance(value, bool) or not math.isfinite(value)):
-            return f"metrics.{name} is {value!r:.40}, not a finite number or null"
-    if not isinstance(metrics.get("failure"), (str, type(None))):
-        return "metrics.failure is not text or null"
-    if not isinstance(metrics.get("starved"), bool):
-        return "metrics.starved is not true or false"
-    artifacts = record.get("artifacts", {})
-    if not isinstance(artifacts, dict) or not all(isinstance(v, str) for v in artifacts.values()):
-        return "artifacts is not an object of paths"
-    return None
 
 
 @dataclass(frozen=True)
@@ -254,9 +214,9 @@ class TrialRunner:
             self._append_runs(trial, 1)
             self._summarise(trial, time.perf_counter() - start)
 
-    def add_runs(self, trial: Trial, count: int) -> list[dict[str, Any]]:
-        """``count`` more runs of ``trial`` (numbered on from its runs), together; the new run
-        dicts (``passed``, ``abstained``, ``cached`` and the metrics). A noisy system's search
+    def add_runs(self, trial: Trial, count: int) -> tuple[RunRecord, ...]:
+        """``count`` more runs of ``trial`` (numbered on from its runs), together; the new runs,
+        judged. A noisy system's search
         (``pytest_sal.engine.search.reliability_search``) places its runs with this."""
         start = time.perf_counter()
         first = len(trial.runs)
@@ -273,48 +233,45 @@ class TrialRunner:
         return any(self.cache.path(key).is_file() for key in keys)
 
     def _append_runs(self, trial: Trial, count: int) -> None:
-        """Run (or read back) the next ``count`` runs of ``trial`` at once and append them."""
+        """Run (or read back) the next ``count`` runs of ``trial`` at once, judge them and append them."""
         numbers = range(len(trial.runs), len(trial.runs) + count)
         if count == 1:
             results = [self._cached_run(trial.value, numbers[0])]
         else:
             with ThreadPoolExecutor(max_workers=count, thread_name_prefix="sal-run") as pool:
                 results = list(pool.map(functools.partial(self._cached_run, trial.value), numbers))
-        for data, cached in results:
-            passed = self.requirement.holds(data["metrics"])
-            # a run the machine starved is no evidence that the system failed: it abstains
-            run = dict(data["metrics"], passed=passed, abstained=bool(data["metrics"].get("starved")) and not passed, cached=cached)
-            if reason := _not_cached(data):
-                run["not_cached"] = reason
-            trial.runs.append(run)
-            trial.artifacts.update({k: v for k, v in data.get("artifacts", {}).items() if k not in trial.artifacts})
+        runs = [record.judged(self.requirement.holds(record.metrics), cached) for record, cached in results]
+        trial.runs = (*trial.runs, *runs)
+        for run in runs:
+            trial.artifacts.update({k: v for k, v in run.artifacts.items() if k not in trial.artifacts})
 
     def _summarise(self, trial: Trial, seconds: float) -> None:
         """The trial's metrics, verdict and time from its runs; reported to ``progress``."""
-        trial.metrics = TrialMetrics(aggregate_metrics(trial.runs))
+        trial.metrics = TrialMetrics.of(trial.runs)
         trial.passed = trial.passes > trial.fails
-        trial.cached = all(r["cached"] for r in trial.runs)
+        trial.cached = all(r.cached for r in trial.runs)
         trial.failed = [str(c) for c in self.requirement.failed(trial.metrics)]
         trial.wall_time_s += seconds
         if self.progress is not None:
             with self._progress_lock:
                 self.progress(trial)
 
-    def _cached_run(self, value: float, number: int) -> tuple[dict[str, Any], bool]:
+    def _cached_run(self, value: float, number: int) -> tuple[RunRecord, bool]:
         """``(record, was_cached)`` of run ``number`` at ``value``: read from the cache, or run by
         the executor and stored (unless the machine decided its failure)."""
         key, rule = self.key(value, number), self.stop_rule
         if self.cache is None:
             return self._execute(value, key if rule is None else self.key(value, number, rule), number, rule), False
         if rule is None:
-            compute = functools.partial(self._execute, value, key, number, None)
-            return self.cache.compute(key, compute, check=run_record_problem, transient=_not_cached)
-        full = self.cache.get(key, check=run_record_problem)
+            compute = functools.partial(self._entry, value, key, number, None)
+            data, cached = self.cache.compute(key, compute, check=RunRecord.entry_problem, transient=_not_cached)
+            return RunRecord.from_entry(data), cached
+        full = self.cache.get(key, check=RunRecord.entry_problem)
         if full is not None:
-            return full, True
+            return RunRecord.from_entry(full), True
         return self._stoppable_run(value, number, key, rule)
 
-    def _stoppable_run(self, value: float, number: int, key: str, rule: StopRule) -> tuple[dict[str, Any], bool]:
+    def _stoppable_run(self, value: float, number: int, key: str, rule: StopRule) -> tuple[RunRecord, bool]:
         """``(record, was_cached)`` of a run ``rule`` may stop, under the lock of its stop key: read
         back (stopped, or finished while this waited for the lock), or run; a finished run is
         stored under the full ``key``, a stopped one under the stop key (see the module text)."""
@@ -323,11 +280,11 @@ class TrialRunner:
         read_back: list[bool] = []
 
         def run() -> dict[str, Any]:
-            full = cache.get(key, check=run_record_problem)
+            full = cache.get(key, check=RunRecord.entry_problem)
             if full is not None:
                 read_back.append(True)
                 return full
-            data = self._execute(value, stop_key, number, rule)
+            data = self._entry(value, stop_key, number, rule)
             if "stopped" not in data["metrics"] and _not_cached(data) is None:
                 cache.put(key, data)
             return data
@@ -336,10 +293,14 @@ class TrialRunner:
             return _not_cached(data) or (None if "stopped" in data["metrics"] else "it finished: stored under its full key")
 
         stop_key = self.key(value, number, rule)
-        data, cached = cache.compute(stop_key, run, check=run_record_problem, transient=kept_apart)
-        return data, cached or bool(read_back)
+        data, cached = cache.compute(stop_key, run, check=RunRecord.entry_problem, transient=kept_apart)
+        return RunRecord.from_entry(data), cached or bool(read_back)
 
-    def _execute(self, value: float, key: str, number: int, stop: StopRule | None) -> dict[str, Any]:
+    def _entry(self, value: float, key: str, number: int, stop: StopRule | None) -> dict[str, Any]:
+        """The cache entry of run ``number`` at ``value`` (``_execute``)."""
+        return self._execute(value, key, number, stop).entry()
+
+    def _execute(self, value: float, key: str, number: int, stop: StopRule | None) -> RunRecord:
         """Run ``number`` at ``value`` on the executor (stopped early by ``stop``); its report
         images (first run of a trial) are written here, on the controller, under the cache's
         ``artifacts`` folder, named by ``key``."""
@@ -362,10 +323,10 @@ class TrialRunner:
         return store_artifacts(self.executor.run(job), self.cache if job.artifacts else None, key)
 
 
-def _not_cached(record: dict[str, Any]) -> str | None:
-    """Why a run record must not be stored (``pytest_sal.engine.execution.run_job.failed_output``
+def _not_cached(entry: dict[str, Any]) -> str | None:
+    """Why a run's cache entry must not be stored (``pytest_sal.engine.execution.run_job.failed_output``
     sets it): the machine decided it."""
-    return record.get("not_cached")
+    return entry.get("not_cached")
 
 
 def _same(a: np.ndarray | None, b: np.ndarray | None) -> bool:

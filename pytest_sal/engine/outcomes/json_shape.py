@@ -2,7 +2,8 @@
 
 A history file is user-owned and can be edited by hand, so nothing read back is trusted: every
 field must have its declared type (``str``, ``int``, ``float``, ``bool``, ``X | None``,
-``list[X]``, ``tuple[X, Y]``, ``dict[str, X]``, a nested dataclass), numbers must be finite,
+``list[X]``, ``tuple[X, Y]``, ``tuple[X, ...]``, ``dict[str, X]``, a nested dataclass, a mapping
+type such as ``RunRecord`` as a ``dict[str, Any]``), numbers must be finite,
 and nesting is bounded (``MAX_NESTING``) before anything recurses into it. Free-form values
 (``Any``: metrics, system options) may hold any JSON; a non-finite number there reads as
 ``None`` (not available), as ``json_safe`` writes it.
@@ -14,6 +15,7 @@ import dataclasses
 import math
 import types
 import typing
+from collections.abc import Mapping
 from typing import Any
 
 __all__ = ["MAX_NESTING", "nesting_problem", "read_fields"]
@@ -71,6 +73,9 @@ def _read(value: Any, hint: Any, key: str) -> Any:
             return None
         (inner,) = [arg for arg in args if arg is not type(None)]
         return _read(value, inner, key)
+    if isinstance(hint, type) and issubclass(hint, Mapping):  # a dict, or a type that reads like one
+        hint = dict[str, Any]
+        origin, args = dict, (str, Any)
     if dataclasses.is_dataclass(hint):
         return read_fields(hint, value, key)  # type: ignore[arg-type]
     if hint in (float, int):
@@ -80,11 +85,12 @@ def _read(value: Any, hint: Any, key: str) -> Any:
             raise ValueError(f"{key} = {_shown(value)} is not {'a text' if hint is str else 'true or false'}")
         return value
     if origin is list or origin is tuple:
-        if not isinstance(value, (list, tuple)) or (origin is tuple and len(value) != len(args)):
-            raise ValueError(f"{key} is not a list" + (f" of {len(args)}" if origin is tuple else ""))
-        kinds = list(args) if origin is tuple else [args[0]] * len(value)
+        fixed = origin is tuple and args[-1:] != (...,)
+        if not isinstance(value, (list, tuple)) or (fixed and len(value) != len(args)):
+            raise ValueError(f"{key} is not a list" + (f" of {len(args)}" if fixed else ""))
+        kinds = list(args) if fixed else [args[0]] * len(value)
         return [_read(item, kind, f"{key}[{i}]") for i, (item, kind) in enumerate(zip(value, kinds))]
-    if origin is dict or (isinstance(hint, type) and issubclass(hint, dict)):
+    if origin is dict:
         if not isinstance(value, dict):
             raise ValueError(f"{key} is not a mapping")
         kind = args[1] if args else Any

@@ -1,5 +1,6 @@
 """Boundary search: where between the envelope's edge and the far end of the search range the
-system stops meeting its requirement. Pure: it knows values and verdicts, not SLAM.
+system stops meeting its requirement. Pure: it knows values and verdicts, not SLAM: ``run_trial``
+gives a ``Verdict`` (the engine's ``Trial``), and the search returns those it was given.
 
 Severity runs from ``mild`` to ``severe`` (for fog, from long to short visibility). The
 search tries the envelope's ``edge`` first: that trial decides the test. If it passes, the
@@ -59,9 +60,9 @@ import math
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from typing import Any, Literal, TypeVar
+from typing import Generic, Literal, Protocol, TypeVar
 
-__all__ = ["TERMINATIONS", "SearchResult", "SearchSpace", "TrialPoint", "boundary_search"]
+__all__ = ["TERMINATIONS", "SearchResult", "SearchSpace", "Verdict", "boundary_search"]
 
 #: Why a search stopped.
 TERMINATIONS = ("tolerance", "max_trials", "not_bracketed", "domain_resolution")
@@ -103,19 +104,21 @@ class SearchSpace:
         return self.domain == "integer" and abs(a - b) <= 1
 
 
-@dataclass
-class TrialPoint:
-    """One value tried: ``passed`` and whatever ``run_trial`` reported (``info``);
-    ``speculative``: tried in a round beside the search path and left off it."""
+class Verdict(Protocol):
+    """What ``run_trial`` gives for a value: the ``value`` and whether it ``passed``; the search
+    sets ``speculative`` on those it tried in a round beside its path and left off it."""
 
     value: float
     passed: bool
-    info: Any = None
-    speculative: bool = False
+    speculative: bool
+
+
+#: the verdicts a search is given and returns
+V = TypeVar("V", bound=Verdict)
 
 
 @dataclass
-class SearchResult:
+class SearchResult(Generic[V]):
     """What the search found.
 
     Attributes:
@@ -132,7 +135,7 @@ class SearchResult:
     pass_value: float | None
     fail_value: float | None
     termination: str
-    trials: list[TrialPoint] = field(default_factory=list)
+    trials: list[V] = field(default_factory=list)
     contradictions: list[str] = field(default_factory=list)
     rounds: int = 0
 
@@ -143,7 +146,7 @@ class SearchResult:
 
 
 def boundary_search(
-    run_trial: Callable[[float], tuple[bool, Any]],
+    run_trial: Callable[[float], V],
     space: SearchSpace,
     edge: float,
     tolerance: float | None = None,
@@ -152,11 +155,11 @@ def boundary_search(
     rel_tolerance: float | None = None,
     width: Callable[[], int] | None = None,
     cached: Callable[[float], bool] | None = None,
-) -> SearchResult:
+) -> SearchResult[V]:
     """Search the failure boundary (see the module text).
 
     Args:
-        run_trial: value -> ``(passed, info)``; runs the trial at the value.
+        run_trial: value -> its ``Verdict``; runs the trial at the value.
         space: search range, domain and scale.
         edge: the envelope's edge (its most severe value).
         tolerance: stop when ``|pass_value - fail_value| <= tolerance`` (the parameter's unit).
@@ -211,12 +214,12 @@ class _Node:
         )
 
 
-class _Search:
+class _Search(Generic[V]):
     """The trials of one search, the bracket they give and the rounds that tried them."""
 
     def __init__(
         self,
-        run_trial: Callable[[float], tuple[bool, Any]],
+        run_trial: Callable[[float], V],
         space: SearchSpace,
         max_trials: int,
         width: Callable[[], int],
@@ -231,7 +234,7 @@ class _Search:
         self.tolerance = tolerance
         self.rel_tolerance = rel_tolerance
         self.cached = cached
-        self.trials: list[TrialPoint] = []
+        self.trials: list[V] = []
         self.rounds = 0
 
     @property
@@ -242,9 +245,9 @@ class _Search:
     def spent(self) -> bool:
         return self.path_trials >= self.max_trials
 
-    def run(self, values: list[float]) -> list[TrialPoint]:
+    def run(self, values: list[float]) -> list[V]:
         """Evaluate ``values`` on the search path, ``width()`` of them a round."""
-        points = self._in_rounds(self._point, values)
+        points = self._in_rounds(self.run_trial, values)
         self.trials += points
         return points
 
@@ -271,7 +274,7 @@ class _Search:
                 return stop
             size = 1 if self.cached(self.space.midpoint(passing, failing)) else max(1, self.width())
             nodes = self._tree(passing, failing, size)
-            reached = dict(zip((node.path for node in nodes), self._round(self._point, [node.value for node in nodes])))
+            reached = dict(zip((node.path for node in nodes), self._round(self.run_trial, [node.value for node in nodes])))
             path: tuple[int, ...] = ()
             while (point := reached.pop(path, None)) is not None:
                 self.trials.append(point)
@@ -312,10 +315,6 @@ class _Search:
             level = [child for node in found for child in node.children(self.space)]
         return chosen
 
-    def _point(self, value: float) -> TrialPoint:
-        passed, info = self.run_trial(value)
-        return TrialPoint(value, bool(passed), info)
-
     def _in_rounds(self, work: Callable[[_Item], _Done], items: Sequence[_Item]) -> list[_Done]:
         """``work`` on each item, ``width()`` items a round."""
         done: list[_Done] = []
@@ -332,7 +331,7 @@ class _Search:
             return list(pool.map(work, items))
 
 
-def _contradictions(trials: list[TrialPoint], space: SearchSpace) -> list[str]:
+def _contradictions(trials: list[V], space: SearchSpace) -> list[str]:
     """Pairs where a more severe value passed while a milder one failed."""
     found = []
     passes = [t for t in trials if t.passed]

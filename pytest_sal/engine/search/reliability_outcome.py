@@ -134,10 +134,7 @@ def reliability_outcome(
 def _judged(trial: Trial, requirement: Requirement) -> Trial:
     """A copy of ``trial`` whose runs are judged by ``requirement`` (a run that failed after the
     machine starved it abstains), with its verdict (the majority) and failed criteria."""
-    runs = []
-    for run in trial.runs:
-        passed = requirement.holds(run)
-        runs.append(dict(run, passed=passed, abstained=bool(run.get("starved")) and not passed, cached=True))
+    runs = tuple(run.judged(requirement.holds(run.metrics), cached=True) for run in trial.runs)
     copy = Trial(value=trial.value, passed=False, metrics=trial.metrics, runs=runs, cached=True, artifacts=dict(trial.artifacts))
     copy.passed = copy.passes > copy.fails
     copy.failed = [str(c) for c in requirement.failed(copy.metrics)]

@@ -127,7 +127,7 @@ def deterministic_search(
     requirement: Requirement,
     settings: SearchSettings,
     warm_start: tuple[float | None, float | None] | None = None,
-) -> SearchResult:
+) -> SearchResult[Trial]:
     """The boundary search of ``requirement`` with ``runner`` (a deterministic system: one run
     a trial, every verdict final): a round's trials are run in threads, as many as
     ``search_width`` allows; a trial left off the search path is marked ``Trial.speculative``."""
@@ -138,12 +138,8 @@ def deterministic_search(
     max_trials = requirement.options.get("max_trials", settings.max_trials)
     _refuse_unchanged(runner, requirement)
 
-    def run_trial(value: float) -> tuple[bool, Trial]:
-        trial = runner.run_trial(value)
-        return trial.passed, trial
-
-    result = boundary_search(
-        run_trial,
+    return boundary_search(
+        runner.run_trial,
         space,
         envelope.value,
         tolerance,
@@ -153,9 +149,6 @@ def deterministic_search(
         width=functools.partial(search_width, runner),
         cached=runner.cached,
     )
-    for point in result.trials:
-        point.info.speculative = point.speculative
-    return result
 
 
 def _refuse_unchanged(runner: TrialRunner, requirement: Requirement) -> None:
@@ -188,7 +181,7 @@ def search_outcome(
     result = deterministic_search(runner, requirement, settings, warm_start)
     verdict = "passed" if result.edge_passed else "failed"
     boundary = Boundary(result.pass_value, result.fail_value, runner.ref.unit)
-    trials = [point.info for point in result.trials]
+    trials = result.trials
     return _outcome(runner, requirement, test_id, verdict, boundary, result.termination, trials, result.contradictions)
 
 
