@@ -17,7 +17,7 @@ from pytest_sal.session_results import SessionResults
 if TYPE_CHECKING:
     from pytest_sal.engine.execution.executor import Executor
     from pytest_sal.history.run_history import History
-    from pytest_sal.store.trial_cache import ContentCache
+    from pytest_sal.store.content_cache import ContentCache
 
 __all__ = ["SAL_SESSION", "SalSession"]
 
@@ -55,7 +55,7 @@ class SalSession:
     def cache(self) -> ContentCache | None:
         """The trial cache (``None`` under ``--sal-no-cache``), opened when first needed."""
         if self._cache is None and self.options.use_cache:
-            from pytest_sal.store.trial_cache import ContentCache
+            from pytest_sal.store.content_cache import ContentCache
 
             self._cache = ContentCache(self.options.cache_dir, self.options.cache_size)
         return self._cache

@@ -143,15 +143,17 @@ def isolated_sal_cache(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Pat
     """Every test session renders and caches into its own folders, never the user's cache nor
     the checkout: ``sal`` commands run without ``--cache-dir`` use ``./.sal/cache``, which is
     redirected here (the plugin's ``<rootdir>/.sal/cache`` is left as it is)."""
-    import pytest_sal.store.trial_cache
+    import pytest_sal.store.content_cache
 
     root = tmp_path_factory.mktemp("sal-cache")
     commands_cache = tmp_path_factory.mktemp("commands-trial-cache")
-    default = pytest_sal.store.trial_cache.content_cache_dir
+    default = pytest_sal.store.content_cache.content_cache_dir
     with pytest.MonkeyPatch.context() as patch:
         patch.setenv("SAL_CACHE_DIR", str(root))
         patch.setattr(
-            pytest_sal.store.trial_cache, "content_cache_dir", lambda rootdir=None: commands_cache if rootdir is None else default(rootdir)
+            pytest_sal.store.content_cache,
+            "content_cache_dir",
+            lambda rootdir=None: commands_cache if rootdir is None else default(rootdir),
         )
         yield root
 

@@ -16,7 +16,7 @@ from cache_parts import BASE, _key
 
 from pytest_sal.cli.main import main
 from pytest_sal.store.cache_keys import cache_key
-from pytest_sal.store.trial_cache import (
+from pytest_sal.store.content_cache import (
     CacheError,
     CacheWarning,
     ContentCache,

@@ -24,7 +24,7 @@ from pytest_sal.engine.execution.run_job import cached_sequence
 from pytest_sal.engine.execution.trial_runner import TrialRunner
 from pytest_sal.engine.requirements import Requirement
 from pytest_sal.store.cache_keys import cache_key
-from pytest_sal.store.trial_cache import CacheWarning, ContentCache
+from pytest_sal.store.content_cache import CacheWarning, ContentCache
 from pytest_sal.testing import FakeSlam
 from sal_adapters import Sequence, open_dataset
 from sal_modules import create, fog, perturb

@@ -18,7 +18,7 @@ from cache_parts import BASE, REPO
 
 from pytest_sal.store.byte_sizes import parse_size
 from pytest_sal.store.cache_keys import cache_key
-from pytest_sal.store.trial_cache import (
+from pytest_sal.store.content_cache import (
     CacheError,
     content_cache_dir,
 )

@@ -14,7 +14,7 @@ from pathlib import Path
 from cache_parts import BASE, REPO, _key
 
 from pytest_sal.store.cache_keys import cache_key
-from pytest_sal.store.trial_cache import (
+from pytest_sal.store.content_cache import (
     ContentCache,
 )
 
@@ -24,7 +24,7 @@ CHILD = textwrap.dedent(
     """
     import os, sys, time
     from pathlib import Path
-    from pytest_sal.store.trial_cache import ContentCache
+    from pytest_sal.store.content_cache import ContentCache
     root, key, mode, signal_file = sys.argv[1:5]
     cache = ContentCache(root)
 

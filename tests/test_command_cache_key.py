@@ -42,7 +42,7 @@ def trial_runner(tmp_path: Path, system):
     from pytest_sal import ate_rmse
     from pytest_sal.engine.execution.trial_runner import TrialRunner
     from pytest_sal.engine.requirements import Requirement
-    from pytest_sal.store.trial_cache import ContentCache
+    from pytest_sal.store.content_cache import ContentCache
     from sal_modules import fog
 
     dataset = open_dataset("synthetic", scene="indoor", frames=8, sensor="rgbd")

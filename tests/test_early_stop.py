@@ -20,7 +20,7 @@ from pytest_sal.engine.execution.trial_runner import TrialRunner
 from pytest_sal.engine.outcomes.outcome import Trial
 from pytest_sal.engine.requirements import Requirement
 from pytest_sal.report.formatting import trial_line
-from pytest_sal.store.trial_cache import ContentCache
+from pytest_sal.store.content_cache import ContentCache
 from pytest_sal.testing import FakeSlam
 from sal_adapters import Sequence, open_dataset
 from sal_wrappers import RunResult, TrackState

@@ -23,7 +23,7 @@ from pytest_sal.engine.execution.early_stop import StopRule
 from pytest_sal.engine.execution.trial_runner import TrialRunner
 from pytest_sal.engine.outcomes.outcome import Trial
 from pytest_sal.engine.requirements import Criterion, Requirement
-from pytest_sal.store.trial_cache import ContentCache
+from pytest_sal.store.content_cache import ContentCache
 from sal_adapters import Sequence, open_dataset
 from sal_modules import create, night, perturb
 from sal_wrappers import TrackState

@@ -20,7 +20,7 @@ from pytest_sal import tracking_rate
 from pytest_sal.engine.execution.run_job import STALLED_CPU_SHARE, machine_failure
 from pytest_sal.engine.execution.trial_runner import TrialRunner
 from pytest_sal.engine.requirements import Requirement
-from pytest_sal.store.trial_cache import ContentCache
+from pytest_sal.store.content_cache import ContentCache
 from sal_adapters import Sequence
 from sal_modules import fog
 from sal_wrappers import create

@@ -263,7 +263,7 @@ def test_the_width_is_the_free_runs_one_a_trial(tmp_path: Path) -> None:
 def test_a_search_cached_along_its_path_sends_no_run_and_does_not_speculate(tmp_path: Path) -> None:
     """A second session with free workers walks the cached path trial by trial: speculating
     beside a cached midpoint would send runs the first session never made."""
-    from pytest_sal.store.trial_cache import ContentCache
+    from pytest_sal.store.content_cache import ContentCache
 
     settings = SearchSettings(tolerance_pct=5.0, max_trials=12)
     cache = ContentCache(tmp_path / "cache")

@@ -24,7 +24,7 @@ from pytest_sal.engine.outcomes.outcome import Outcome, Trial
 from pytest_sal.engine.outcomes.run_record import RunRecord
 from pytest_sal.engine.requirements import Requirement
 from pytest_sal.engine.search.requirement_search import SearchSettings, search_outcome
-from pytest_sal.store.trial_cache import ContentCache
+from pytest_sal.store.content_cache import ContentCache
 from sal_adapters import open_dataset
 from sal_modules import fog
 from sal_wrappers import SlamSystem, create

@@ -34,7 +34,7 @@ from pytest_sal.engine.execution.trial_runner import TrialRunner
 from pytest_sal.engine.outcomes.outcome import Outcome
 from pytest_sal.engine.requirements import Requirement
 from pytest_sal.engine.search.requirement_search import SearchSettings, search_outcome
-from pytest_sal.store.trial_cache import ContentCache
+from pytest_sal.store.content_cache import ContentCache
 from pytest_sal.testing import FakeSlam, LostWorkerSlam
 from sal_adapters import Sequence, open_dataset
 from sal_adapters.common.errors import DatasetError

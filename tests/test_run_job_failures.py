@@ -17,7 +17,7 @@ from pytest_sal.engine.execution.run_job import RunJob, check_readable, failed_o
 from pytest_sal.engine.execution.trial_runner import TrialRunner
 from pytest_sal.engine.outcomes.run_record import RunRecord
 from pytest_sal.engine.requirements import Requirement
-from pytest_sal.store.trial_cache import ContentCache
+from pytest_sal.store.content_cache import ContentCache
 from pytest_sal.testing import FakeSlam
 from sal_adapters import Sequence, open_dataset
 from sal_adapters.common.errors import DatasetError

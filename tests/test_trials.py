@@ -12,7 +12,7 @@ from pytest_sal.engine.execution.run_job import cached_sequence
 from pytest_sal.engine.execution.trial_runner import TrialRunner
 from pytest_sal.engine.outcomes.outcome import Trial, TrialMetrics
 from pytest_sal.engine.requirements import Requirement
-from pytest_sal.store.trial_cache import ContentCache
+from pytest_sal.store.content_cache import ContentCache
 from pytest_sal.testing import FakeSlam, applied_value
 from sal_adapters import open_dataset
 from sal_modules import create, fog, perturb

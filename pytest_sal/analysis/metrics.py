@@ -107,22 +107,7 @@ def evaluate(
     """
     lengths = segment_lengths(KITTI_SEGMENTS_M if kitti_segments is None else kitti_segments)
     align = align or ("sim3" if result.sensor == "mono" else "se3")
-    unscored = RunMetrics(
-        system=result.system,
-        sequence=result.sequence,
-        sensor=result.sensor,
-        scored=result.scored,
-        align=align,
-        frames=result.frames,
-        tracked=result.tracked,
-        tracking_rate=result.tracking_rate,
-        first_tracked=result.first_tracked,
-        maps=result.maps,
-        rpe_delta=float(rpe_delta),
-        rpe_unit=rpe_unit,
-        kitti_segments_m=lengths,
-        has_groundtruth=groundtruth is not None,
-    )
+    unscored = _unscored(result, align, float(rpe_delta), rpe_unit, lengths, groundtruth is not None)
     trajectory = result.trajectory
     poses = 0 if trajectory is None else len(trajectory)
     if result.failure is not None and not (result.info.get(WRITTEN_BEFORE_FAILURE) and poses >= MIN_POSES):
@@ -165,6 +150,28 @@ def evaluate(
         scale_error=mono_scale_error,
         failure=result.failure,
         ate=absolute,
+    )
+
+
+def _unscored(
+    result: RunResult, align: Align, rpe_delta: float, rpe_unit: RpeUnit, lengths: tuple[float, ...], has_groundtruth: bool
+) -> RunMetrics:
+    """The metrics of ``result`` that need no scoring: what it ran and tracked, and how it will be scored."""
+    return RunMetrics(
+        system=result.system,
+        sequence=result.sequence,
+        sensor=result.sensor,
+        scored=result.scored,
+        align=align,
+        frames=result.frames,
+        tracked=result.tracked,
+        tracking_rate=result.tracking_rate,
+        first_tracked=result.first_tracked,
+        maps=result.maps,
+        rpe_delta=rpe_delta,
+        rpe_unit=rpe_unit,
+        kitti_segments_m=lengths,
+        has_groundtruth=has_groundtruth,
     )
 
 

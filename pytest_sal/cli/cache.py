@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from pytest_sal.store.trial_cache import DEFAULT_CACHE_DIR, ContentCache
+from pytest_sal.store.content_cache import DEFAULT_CACHE_DIR, ContentCache
 
 __all__ = ["add_cache_commands", "format_bytes"]
 

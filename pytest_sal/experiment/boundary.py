@@ -39,7 +39,7 @@ if TYPE_CHECKING:  # numpy, OpenCV and the modules load when a search runs, not 
     from pytest_sal.engine.execution.executor import Executor
     from pytest_sal.engine.outcomes.outcome import Outcome, Trial
     from pytest_sal.engine.search.requirement_search import Search
-    from pytest_sal.store.trial_cache import ContentCache
+    from pytest_sal.store.content_cache import ContentCache
     from sal_modules.params import ParamRef
     from sal_wrappers.base import SlamSystem
 
@@ -144,7 +144,7 @@ def prepare_boundary_search(
     from pytest_sal.engine.execution.trial_runner import RunPolicy
     from pytest_sal.engine.requirements import Requirement, ate_rmse, tracking_rate
     from pytest_sal.engine.search.requirement_search import Search
-    from pytest_sal.store.trial_cache import command_cache
+    from pytest_sal.store.content_cache import command_cache
 
     rb = enabled_boundary(config)
     ref = boundary_parameter(config, rb)

@@ -98,7 +98,7 @@ def evaluate_experiment(
     (``None`` or ``local``: here, one at a time; another one needs the cache). Returns the
     summary (also in ``metrics/summary.json``) with ``root``, the results folder, added."""
     from pytest_sal.engine.execution.run_job import cached_sequence
-    from pytest_sal.store.trial_cache import command_cache
+    from pytest_sal.store.content_cache import command_cache
 
     remote = executor if executor is not None and executor.name != "local" else None
     if remote is not None and not use_cache:

@@ -27,7 +27,7 @@ from sal_adapters.common.textfiles import atomic_write_text
 from sal_adapters.datasets import WRITTEN_MARKER, write_sequence
 
 if TYPE_CHECKING:  # numpy and the modules load when a command runs, not for `sal --help`
-    from pytest_sal.store.trial_cache import ContentCache
+    from pytest_sal.store.content_cache import ContentCache
     from sal_adapters.sequence import Sequence
     from sal_modules.base import Perturbation
 
@@ -76,7 +76,7 @@ def write_perturbations(plan: PerturbPlan, *, cache_dir: Path | None = None, pro
     and ``config.yaml``. A target folder that ``sal perturb`` did not write is a
     ``ConfigError``, before anything is written. Returns the content of ``pipeline_results.json``
     (per perturbation: frames in and kept, dropped frame indices, seconds, cached, output)."""
-    from pytest_sal.store.trial_cache import command_cache
+    from pytest_sal.store.content_cache import command_cache
 
     config, clean, images = plan.config, plan.clean, plan.root / "images"
     for name in plan.sequences:

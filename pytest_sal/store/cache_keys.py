@@ -2,7 +2,7 @@
 
 ``cache_key(dataset=..., module=..., seed=..., system=..., runs=...)`` names a trial; equal
 values give equal keys whatever the order of keywords or mapping keys, and any change of a part
-gives another key. :mod:`pytest_sal.store.trial_cache` stores entries under these keys.
+gives another key. :mod:`pytest_sal.store.content_cache` stores entries under these keys.
 """
 
 from __future__ import annotations

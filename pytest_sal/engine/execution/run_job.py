@@ -33,7 +33,7 @@ from pytest_sal.analysis.aggregation import AGGREGATED
 from pytest_sal.analysis.metrics import RunMetrics, evaluate
 from pytest_sal.engine.execution.early_stop import StopRule
 from pytest_sal.engine.outcomes.run_record import RunRecord
-from pytest_sal.store.trial_cache import ContentCache
+from pytest_sal.store.content_cache import ContentCache
 from sal_adapters import Sequence, Trajectory
 from sal_adapters.common.errors import DatasetError
 from sal_modules import Perturbation, perturb

@@ -49,7 +49,7 @@ from pytest_sal.engine.outcomes.outcome import Trial, TrialMetrics
 from pytest_sal.engine.outcomes.run_record import RunRecord
 from pytest_sal.engine.requirements import Requirement
 from pytest_sal.store.cache_keys import cache_key
-from pytest_sal.store.trial_cache import ContentCache
+from pytest_sal.store.content_cache import ContentCache
 from sal_adapters import Sequence
 from sal_modules import Perturbation, perturb
 from sal_modules.params import ParamRef

@@ -21,7 +21,7 @@ from sal_modules.params import ParamRef
 if TYPE_CHECKING:  # the plugin reads SearchSettings at configure time, before any trial runs
     from pytest_sal.engine.execution.executor import Executor
     from pytest_sal.engine.execution.trial_runner import TrialRunner
-    from pytest_sal.store.trial_cache import ContentCache
+    from pytest_sal.store.content_cache import ContentCache
     from sal_adapters import Sequence
     from sal_wrappers import SlamSystem
 

@@ -1,12 +1,10 @@
-"""The content-addressed cache of runs and perturbed sequences (one entry each).
+"""The content-addressed cache: one entry per stored run (a JSON-ready dict) or perturbed
+sequence (a folder written with ``write_sequence``).
 
-A trial (perturb a dataset at one severity, run a SLAM system N times, score with evo) is named
-by :func:`pytest_sal.store.cache_keys.cache_key` of everything that decides its outcome: the dataset fingerprint, the module
-name, version and canonical parameters, the seed, the system name, options and version, and the
-number of runs. :class:`ContentCache` stores one JSON-ready dict (a trial result) or one folder
-(a perturbed sequence written with ``write_sequence``) per key, so that an identical trial is
-computed once, also when two pytest-xdist workers ask for it at the same moment, and a second
-identical run of a suite does not run SLAM at all.
+An entry is named by :func:`pytest_sal.store.cache_keys.cache_key` of everything that decides
+it: the dataset fingerprint, the module's name, version and parameters, the seed, the system's
+identity and the run's number. So a run is computed once, also when two pytest-xdist workers ask
+for it at the same moment, and a second identical session runs no SLAM at all.
 
 Under the cache root (default ``.sal/cache`` under the pytest rootdir) a ``.gitignore`` of
 ``*`` is written when the folder is first created; the entries, their locks and temporary
@@ -36,9 +34,9 @@ refused write leaves no temporary file.
 
 >>> from pytest_sal.store.cache_keys import cache_key
 >>> key = cache_key(dataset="3f2a...", module={"name": "fog", "version": 1, "params": {"visibility_m": 30.0}},
-...                 seed=0, system={"name": "orbslam3", "options": {}, "version": "1.0"}, runs=3)
+...                 seed=0, system={"name": "orbslam3", "options": {}, "version": "1.0"}, run=0)
 >>> cache = ContentCache(Path(".sal/cache"))                      # doctest: +SKIP
->>> result, was_cached = cache.compute(key, run_trial)            # doctest: +SKIP
+>>> record, was_cached = cache.compute(key, run_once)            # doctest: +SKIP
 """
 
 from __future__ import annotations
@@ -61,15 +59,7 @@ from sal_adapters.common.errors import CacheWarning
 from sal_adapters.common.file_lock import FileLock
 from sal_adapters.common.textfiles import atomic_write
 
-__all__ = [
-    "DEFAULT_CACHE_DIR",
-    "CacheError",
-    "CacheWarning",
-    "ContentCache",
-    "EntryCheck",
-    "command_cache",
-    "content_cache_dir",
-]
+__all__ = ["DEFAULT_CACHE_DIR", "CacheError", "CacheWarning", "ContentCache", "EntryCheck", "command_cache", "content_cache_dir"]
 
 #: The cache folder relative to the pytest rootdir (or the current folder for ``sal cache``).
 DEFAULT_CACHE_DIR = Path(".sal") / "cache"
