@@ -5,6 +5,8 @@ declares them. What they say for one session is read and checked in :mod:`pytest
 from __future__ import annotations
 
 import argparse
+import os
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 import pytest
@@ -12,7 +14,7 @@ import pytest
 if TYPE_CHECKING:
     from pytest_sal.history.regression import RegressionCheck
 
-__all__ = ["INI_KEYS", "OPTIONS", "add_options"]
+__all__ = ["INI_KEYS", "OPTIONS", "PATH_OPTIONS", "VALUE_OPTIONS", "add_options", "space_form_problem"]
 
 
 def _compare_fail(text: str) -> RegressionCheck:
@@ -173,6 +175,13 @@ OPTIONS: tuple[tuple[str, dict[str, Any]], ...] = (
     ),
 )
 
+#: options whose value is a path (``DIR``, ``FILE``): given with a space, pytest takes it for a test path
+PATH_OPTIONS = tuple(flag for flag, spec in OPTIONS if spec.get("metavar") in ("DIR", "FILE"))
+#: the other options that take a value (refused with a space only when the value is an existing path)
+VALUE_OPTIONS = tuple(
+    flag for flag, spec in OPTIONS if spec.get("action") not in ("store_true", "store_false") and flag not in PATH_OPTIONS
+)
+
 #: the ``sal_*`` ini keys: (name, help, default)
 INI_KEYS: tuple[tuple[str, str, str | None], ...] = (
     ("sal_cache_dir", "cache folder (default .sal/cache)", None),
@@ -218,3 +227,25 @@ def add_options(parser: pytest.Parser) -> None:
         group.addoption(flag, **spec)
     for name, text, default in INI_KEYS:
         parser.addini(name, text, default=default)
+
+
+def space_form_problem(args: Sequence[str], rootdir: str, inifile: str | None) -> str | None:
+    """Why ``args`` cannot be run as given, or ``None``.
+
+    pytest picks its rootdir and ini file from the arguments that look like existing paths
+    before plugins are loaded, so ``--sal-history-dir /x/history`` written with a space makes
+    ``/x/history`` count as a test path there: the rootdir moves, the project's ini file is not
+    read and node ids change. A path option given with a space is refused every time (a folder
+    that exists only from the second run on would change the outcome between runs); another
+    option only when its value names an existing path.
+    """
+    for option, value in zip(args, args[1:]):
+        is_path_option = option in PATH_OPTIONS
+        if not (is_path_option or (option in VALUE_OPTIONS and not value.startswith("-") and os.path.exists(value))):
+            continue
+        return (
+            f"write {option}={value} with '=': given as two words, pytest takes {value} for a test path while it "
+            f"chooses the rootdir and ini file, before pytest-sal is loaded (rootdir {rootdir}, ini file "
+            f"{inifile or 'none'}), so the project's settings and test ids could change"
+        )
+    return None

@@ -13,7 +13,8 @@ from typing import TYPE_CHECKING
 
 import pytest
 
-from pytest_sal.history.gate import MISSING_POLICIES, space_form_problem
+from pytest_sal.history.gate import MISSING_POLICIES
+from pytest_sal.option_table import space_form_problem
 from sal_adapters.common.errors import SalDeprecationWarning
 
 if TYPE_CHECKING:

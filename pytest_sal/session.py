@@ -164,7 +164,7 @@ class SalSession:
             earlier=tuple(self._earlier(family)),
             **where,
         )
-        metrics = trial_metric_names([(c.metric.name, c.op, c.threshold) for c in requirement.criteria])  # as the reports show them
+        metrics = trial_metric_names(requirement.criteria_rows())  # as the reports show them
         progress = trial_printer(self.config, item.nodeid, ref.label, ref.unit, metrics)
         return self._finished(run_search(search, self.cache, self.executor(), progress), system, family)
 

@@ -14,10 +14,11 @@ import pytest
 from history_outcomes import FOG, drop, fog, save
 
 from pytest_sal.cli.main import main
-from pytest_sal.history.gate import NOT_COMPARED, compare_with_baseline, space_form_problem
+from pytest_sal.history.gate import NOT_COMPARED, compare_with_baseline
 from pytest_sal.history.provenance import machine_info, machine_text
 from pytest_sal.history.regression import BoundaryCheck
 from pytest_sal.history.run_history import History
+from pytest_sal.option_table import space_form_problem
 from sal_wrappers import create
 
 TEN_PERCENT = [BoundaryCheck(10.0, True)]

@@ -118,7 +118,7 @@ def _step_printer(search: BoundarySearch) -> Callable[[Trial], None]:
     from pytest_sal.report.outcome_report import trial_metric_names
 
     ref = search.search.ref
-    metrics = trial_metric_names([(c.metric.name, c.op, c.threshold) for c in search.search.requirement.criteria])
+    metrics = trial_metric_names(search.search.requirement.criteria_rows())
     count = 0
 
     def show(trial: Trial) -> None:

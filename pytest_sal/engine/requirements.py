@@ -190,6 +190,10 @@ class Requirement:
     def holds(self, metrics: Mapping[str, Any]) -> bool:
         return all(c.holds(metrics) for c in self.criteria)
 
+    def criteria_rows(self) -> list[tuple[str, str, float]]:
+        """The criteria as ``(metric, op, threshold)``: the form outcomes, history and reports keep."""
+        return [(c.metric.name, c.op, c.threshold) for c in self.criteria]
+
     def failed(self, metrics: Mapping[str, Any]) -> list[Criterion]:
         return [c for c in self.criteria if not c.holds(metrics)]
 

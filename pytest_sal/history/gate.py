@@ -7,14 +7,10 @@ compares with the last good run). Of the runs REF names, the newest that holds t
 baseline (``History.baseline``). A test with nothing to compare against is said so in its
 ``comparison``; under ``--sal-compare-missing=fail`` it fails. A regression is what
 ``regression.judge`` finds; without ``--sal-compare-fail`` it is said, not failed.
-
-Also here: what a pytest argument list gets wrong before plugins load (``space_form_problem``).
 """
 
 from __future__ import annotations
 
-import os
-from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 from sal_adapters.common.errors import SalError
@@ -24,16 +20,12 @@ if TYPE_CHECKING:
     from pytest_sal.history.regression import RegressionCheck
     from pytest_sal.history.run_history import History
 
-__all__ = ["MISSING_POLICIES", "NOT_COMPARED", "PATH_OPTIONS", "compare_with_baseline", "space_form_problem"]
+__all__ = ["MISSING_POLICIES", "NOT_COMPARED", "compare_with_baseline"]
 
 #: what a test with no baseline does: ``pass`` (said in its row and the summary) or ``fail``
 MISSING_POLICIES = ("pass", "fail")
 #: how ``Outcome.comparison`` starts when there was nothing to compare with
 NOT_COMPARED = "not compared: "
-#: options whose value is a path: given with a space, pytest takes it for a test path
-PATH_OPTIONS = ("--sal-cache-dir", "--sal-history-dir", "--sal-report-md", "--sal-report-html")
-#: other options that take a value (refused with a space only when the value is an existing path)
-VALUE_OPTIONS = ("--sal-cache-size", "--sal-save", "--sal-compare", "--sal-compare-fail", "--sal-compare-missing")
 
 
 def compare_with_baseline(
@@ -76,28 +68,6 @@ def compare_with_baseline(
     outcome.comparison = "; ".join(notes)
     outcome.regression = "; ".join(judgement.failing) if judgement.failing else None
     return outcome
-
-
-def space_form_problem(args: Sequence[str], rootdir: str, inifile: str | None) -> str | None:
-    """Why ``args`` cannot be run as given, or ``None``.
-
-    pytest picks its rootdir and ini file from the arguments that look like existing paths
-    before plugins are loaded, so ``--sal-history-dir /x/history`` written with a space makes
-    ``/x/history`` count as a test path there: the rootdir moves, the project's ini file is not
-    read and node ids change. A path option given with a space is refused every time (a folder
-    that exists only from the second run on would change the outcome between runs); another
-    option only when its value names an existing path.
-    """
-    for option, value in zip(args, args[1:]):
-        is_path_option = option in PATH_OPTIONS
-        if not (is_path_option or (option in VALUE_OPTIONS and not value.startswith("-") and os.path.exists(value))):
-            continue
-        return (
-            f"write {option}={value} with '=': given as two words, pytest takes {value} for a test path while it "
-            f"chooses the rootdir and ini file, before pytest-sal is loaded (rootdir {rootdir}, ini file "
-            f"{inifile or 'none'}), so the project's settings and test ids could change"
-        )
-    return None
 
 
 def _ref_text(ref: str) -> str:

@@ -264,7 +264,7 @@ def _outcome(
         worse=str(ref.param.worse),
         edge=edge,
         requirement=str(requirement),
-        criteria=[(c.metric.name, c.op, c.threshold) for c in requirement.criteria],
+        criteria=requirement.criteria_rows(),
         envelope=requirement.envelope.condition if requirement.envelope is not None else "",
         verdict=verdict,
         boundary=boundary,
