@@ -318,8 +318,9 @@ class ParamRef:
         """The configured module (or chain) with this parameter set to ``value`` (its unit): a
         ``sal_modules.base.Perturbation``, typed ``Any`` as ``target`` is, since that class sits
         above this module (it makes ``ParamRef``s)."""
-        base = self.target() if isinstance(self.target, type) else self.target
-        return base.with_params(**{self.address: value})
+        if isinstance(self.target, type):  # a module class: built once, with its defaults elsewhere
+            return self.target(**{self.address: value})
+        return self.target.with_params(**{self.address: value})
 
     def unchanged_at(self, value: Any) -> str | None:
         """Why the module owning this parameter leaves the frames unchanged at ``value``
