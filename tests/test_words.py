@@ -72,6 +72,20 @@ def test_a_tolerance_is_a_number_in_the_unit_or_a_percent_of_the_larger_end() ->
             parse_tolerance(bad)
 
 
+def test_the_default_tolerance_is_the_same_in_the_decorator_the_ini_and_yaml(tmp_path: Path) -> None:
+    """A requirement and a YAML block that name no tolerance search to 10 % of the bracket's
+    larger end, the ini's default (YAML's default was 0.05 in the unit before)."""
+    block = boundary_block(tmp_path)
+    block["robustness_boundary"].pop("tolerance", None)  # type: ignore[attr-defined]
+    config = load_config(write(tmp_path, block))
+    assert config.robustness_boundary is not None and config.robustness_boundary.tolerance == "10%"
+    decorator = Requirement.build([tracking_rate >= 0.5, fog.visibility_m >= 25])
+    ini_default, _ = ini_tolerance_percent("10%")
+    assert search_tolerances(decorator.options, ini_default) == (None, 0.1)
+    yaml_search = prepare_boundary_search(config, FakeSlam(), use_cache=False)
+    assert search_tolerances(yaml_search.search.requirement.options, ini_default) == (None, 0.1)
+
+
 @pytest.mark.parametrize("given, expected", [(5, (5.0, None)), ("10%", (None, 0.1)), ("2.5%", (None, 0.025))])
 def test_the_same_tolerance_means_the_same_in_the_decorator_yaml_and_ini(
     tmp_path: Path, given: float | str, expected: tuple[float | None, float | None]

@@ -111,7 +111,7 @@ class BoundaryConfig:
     enabled: bool = False
     name: str = ""
     module: str = ""
-    tolerance: float | str = 0.05
+    tolerance: float | str = "10%"
     max_trials: int = 8
     ate_rmse_fail: float = 1.5
     fail_on_tracking_failure: bool = True
