@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import json
 import math
+import statistics
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -339,8 +340,7 @@ def _vs_baseline(p: Any, b: Any, result: Any, *, baseline_traj: Trajectory | Non
 
 
 def _summary(all_metrics: dict[str, list[Any]], slam: str, system: Any, config: Any, clean: Any, runs: int) -> dict[str, Any]:
-    import numpy as np
-
+    from pytest_sal.analysis.aggregation import summary
     from pytest_sal.analysis.kitti_metrics import KITTI_SEGMENTS_M
 
     entries: dict[str, Any] = {}
@@ -351,19 +351,9 @@ def _summary(all_metrics: dict[str, list[Any]], slam: str, system: Any, config: 
             "failure_reasons": [{"run": i, "reason": m.failure} for i, m in enumerate(ms, 1) if m.failure is not None],
             "kitti_missing": [{"run": i, "reason": m.kitti_missing} for i, m in enumerate(ms, 1) if m.kitti_missing is not None],
         }
-        for metric in SUMMARY_METRICS:
-            values = [float(v) for v in (getattr(m, metric) for m in ms) if v is not None and math.isfinite(float(v))]
-            a = np.asarray(values)
-            stats: dict[str, Any] = {s: None for s in ("median", "mean", "std", "min", "max")}
-            if len(a):
-                stats = {
-                    "median": float(np.median(a)),
-                    "mean": float(a.mean()),
-                    "std": float(a.std()),
-                    "min": float(a.min()),
-                    "max": float(a.max()),
-                }
-            entry[metric] = {**stats, "count": len(values), "values": values}
+        for metric in SUMMARY_METRICS:  # the one rule of pytest_sal.analysis.aggregation, and the spread
+            stats = summary(getattr(m, metric) for m in ms)
+            entry[metric] = {**stats, "std": None if stats["median"] is None else statistics.pstdev(stats["values"])}
         entries[name] = entry
     return {
         "system": slam,
