@@ -16,8 +16,8 @@ pytest.importorskip("pyorbslam3")
 from pytest_sal.analysis.metrics import evaluate
 from sal_adapters.datasets import open_dataset
 from sal_wrappers import RunResult, SlamSystemError, create
-from sal_wrappers import orbslam3 as orbslam3_module
 from sal_wrappers.child_process import ChildOutcome
+from sal_wrappers.orbslam3 import system as orbslam3_module
 from sal_wrappers.orbslam3.states import ORB_STATES
 from sal_wrappers.orbslam3.system import OrbSlam3
 from sal_wrappers.pacing import repace
