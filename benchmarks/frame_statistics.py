@@ -41,17 +41,11 @@ def grey(image: np.ndarray) -> np.ndarray:
     return image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
 
 
-def block_std(g: np.ndarray, size: int) -> np.ndarray:
-    """Standard deviation of each ``size`` x ``size`` block (the image cropped to whole blocks)."""
+def blocks(g: np.ndarray, size: int) -> np.ndarray:
+    """The ``size`` x ``size`` blocks of ``g`` (cropped to whole blocks), as float64 of shape
+    ``(rows, size, columns, size)``: reduce over axes (1, 3) for a value per block."""
     h, w = (g.shape[0] // size) * size, (g.shape[1] // size) * size
-    blocks = g[:h, :w].astype(np.float64).reshape(h // size, size, w // size, size)
-    return blocks.std(axis=(1, 3))
-
-
-def block_mean(g: np.ndarray, size: int) -> np.ndarray:
-    """Mean of each ``size`` x ``size`` block (the image cropped to whole blocks)."""
-    h, w = (g.shape[0] // size) * size, (g.shape[1] // size) * size
-    return g[:h, :w].astype(np.float64).reshape(h // size, size, w // size, size).mean(axis=(1, 3))
+    return g[:h, :w].astype(np.float64).reshape(h // size, size, w // size, size)
 
 
 def look_alike_share(g: np.ndarray, orb: cv2.ORB) -> float:
@@ -72,6 +66,12 @@ def camera_motion(seq: Sequence, frames: int) -> tuple[float, float]:
     steps = np.linalg.inv(poses[:-1]) @ poses[1:]
     angles = np.degrees(np.arccos(np.clip((np.trace(steps[:, :3, :3], axis1=1, axis2=2) - 1) / 2, -1, 1)))
     return float(np.median(np.linalg.norm(steps[:, :3, 3], axis=1))), float(np.median(angles))
+
+
+def bright_flat_share(g: np.ndarray) -> float:
+    """Share of 16x16 blocks that are flat (std < 2) and bright (mean >= 180): sky."""
+    b = blocks(g, 16)
+    return float(((b.std(axis=(1, 3)) < 2) & (b.mean(axis=(1, 3)) >= 180)).mean())
 
 
 def high_frequency_share(g: np.ndarray) -> float:
@@ -101,25 +101,34 @@ STATISTICS: dict[str, Callable[[np.ndarray], float]] = {
     "share < 16": lambda g: float((g < 16).mean()),
     "share >= 250": lambda g: float((g >= 250).mean()),
     "RMS contrast (std / mean)": lambda g: float(g.std() / max(g.mean(), 1e-9)),
-    "local contrast (median 8x8 std)": lambda g: float(np.median(block_std(g, 8))),
-    "flat 16x16 blocks (std < 2)": lambda g: float((block_std(g, 16) < 2).mean()),
-    "Sobel magnitude mean": lambda g: float(np.hypot(cv2.Sobel(g, cv2.CV_32F, 1, 0), cv2.Sobel(g, cv2.CV_32F, 0, 1)).mean()),
-    "Sobel magnitude p90": lambda g: float(np.percentile(np.hypot(cv2.Sobel(g, cv2.CV_32F, 1, 0), cv2.Sobel(g, cv2.CV_32F, 0, 1)), 90)),
+    "local contrast (median 8x8 std)": lambda g: float(np.median(blocks(g, 8).std(axis=(1, 3)))),
+    "flat 16x16 blocks (std < 2)": lambda g: float((blocks(g, 16).std(axis=(1, 3)) < 2).mean()),
     "power above Nyquist / 4": high_frequency_share,
-    "bright flat 16x16 blocks (sky)": lambda g: float(((block_std(g, 16) < 2) & (block_mean(g, 16) >= 180)).mean()),
+    "bright flat 16x16 blocks (sky)": bright_flat_share,
 }
 
 
 def sequence_statistics(seq: Sequence, frames: int) -> dict[str, float]:
     """The median over the first ``frames`` frames of each statistic."""
     orb = cv2.ORB_create(nfeatures=2000, fastThreshold=20)
-    names = [*STATISTICS, "ORB keypoints", "ORB median response", "ORB grid cells (8x8) hit", "ORB look-alikes (<= 40 bits)"]
+    names = [
+        *STATISTICS,
+        "Sobel magnitude mean",
+        "Sobel magnitude p90",
+        "ORB keypoints",
+        "ORB median response",
+        "ORB grid cells (8x8) hit",
+        "ORB look-alikes (<= 40 bits)",
+    ]
     rows: dict[str, list[float]] = {name: [] for name in [*names, "frame-to-frame change"]}
     previous = None
     for i in range(min(frames, len(seq))):
         g = grey(seq[i].image)
         for name, statistic in STATISTICS.items():
             rows[name].append(statistic(g))
+        magnitude = np.hypot(cv2.Sobel(g, cv2.CV_32F, 1, 0), cv2.Sobel(g, cv2.CV_32F, 0, 1))
+        rows["Sobel magnitude mean"].append(float(magnitude.mean()))
+        rows["Sobel magnitude p90"].append(float(np.percentile(magnitude, 90)))
         count, response, spread = orb_stats(g, orb)
         rows["ORB keypoints"].append(count)
         rows["ORB median response"].append(response)
