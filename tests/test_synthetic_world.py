@@ -17,7 +17,7 @@ from sal_adapters import (
 )
 from sal_adapters.synthetic import WORLDS
 from sal_adapters.synthetic.geometry import BoxBuilder
-from sal_adapters.synthetic.render import Renderer, Stage
+from sal_adapters.synthetic.render import Renderer, Stage, sun_light
 
 SCENES = ("urban", "indoor")
 #: fx, fy, cx, cy, width, height, fps, baseline (m), depth scale
@@ -71,10 +71,10 @@ def test_default_sensor_is_stereo_outdoors_and_rgbd_indoors() -> None:
     assert open_dataset("synthetic", scene="indoor", frames=2).sensor == "rgbd"
 
 
-def test_urban_camera_drives_forward_at_10_m_per_s_1_65_m_above_the_road() -> None:
+def test_urban_camera_drives_forward_at_4_m_per_s_1_65_m_above_the_road() -> None:
     seq = rgbd("urban", 21)
     steps = np.linalg.norm(np.diff(seq.groundtruth.positions, axis=0), axis=1) * seq.fps
-    assert np.all((steps > 9.0) & (steps < 11.0)) and np.mean(steps) == pytest.approx(10.0, abs=0.3)
+    assert np.all((steps > 3.5) & (steps < 4.5)) and np.mean(steps) == pytest.approx(4.0, abs=0.3)
     travel = seq.groundtruth.positions[-1]
     assert travel[2] / np.linalg.norm(travel) > 0.998  # straight ahead, along the first camera's z
     # Road points at the bottom centre: Y (camera frame, down) is the camera height.
@@ -173,8 +173,9 @@ def test_right_image_is_left_image_shifted_by_disparity(scene: str) -> None:
 
 @pytest.mark.parametrize("scene", SCENES)
 def test_orb_finds_features_everywhere_but_in_the_sky(scene: str) -> None:
-    """8 x 6 grid: ORB (2000 features) hits >= 85 % of the cells without sky (>= 80 % in every
-    frame) and no cell that is all sky; no feature lies in the sky away from structure."""
+    """8 x 6 grid: ORB (2000 features) hits >= 75 % of the cells without sky (>= 70 % in every
+    frame; the shaded side of the urban street holds fewer, as KITTI's shade does) and no cell that is all sky; no feature lies in the sky farther than 8 px from
+    structure (the lens blur's reach, 3 px, plus ORB's coarse pyramid levels)."""
     seq = rgbd(scene, 31)
     coverage = []
     for frame in (seq[0], seq[15], seq[30]):
@@ -188,24 +189,53 @@ def test_orb_finds_features_everywhere_but_in_the_sky(scene: str) -> None:
         cells = [[sky[r * height // 6 : (r + 1) * height // 6, c * width // 8 : (c + 1) * width // 8] for c in range(8)] for r in range(6)]
         sky_share = np.array([[cell.mean() for cell in row] for row in cells])
         assert counts[sky_share == 1.0].sum() == 0
-        structure = cv2.dilate((~sky).astype(np.uint8), np.ones((9, 9), np.uint8)).astype(bool)
+        structure = cv2.dilate((~sky).astype(np.uint8), np.ones((17, 17), np.uint8)).astype(bool)
         assert structure[xy[:, 1].astype(int), xy[:, 0].astype(int)].all()
         coverage.append((counts[sky_share < 0.1] > 0).mean())
-    assert min(coverage) >= 0.8 and np.mean(coverage) >= 0.85, coverage
+    assert min(coverage) >= 0.7 and np.mean(coverage) >= 0.75, coverage
     if scene == "urban":
         assert (seq[0].depth == 0).mean() > 0.03  # there is a sky
     else:
         assert (seq[0].depth > 0).all()  # a closed room
 
 
-def test_sky_is_a_smooth_gradient_without_depth() -> None:
+def test_sky_is_smooth_overexposed_and_without_depth() -> None:
+    """The exposure is set for the sunlit street, so the sky is near white and mostly clipped
+    (as KITTI's); away from structure (the lens blur reaches 3 px) it has no edges."""
     frame = rgbd("urban", 1)[0]
-    sky = cv2.erode((frame.depth == 0).astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+    sky = cv2.erode((frame.depth == 0).astype(np.uint8), np.ones((9, 9), np.uint8)).astype(bool)
     image = grey(frame.image)
     gradient = np.abs(cv2.Sobel(image, cv2.CV_64F, 1, 0)) + np.abs(cv2.Sobel(image, cv2.CV_64F, 0, 1))
     assert sky.sum() > 5000 and gradient[sky].max() <= 16  # 8-bit steps of a smooth ramp
-    top, bottom = image[sky].reshape(-1)[:100].mean(), image[sky].reshape(-1)[-100:].mean()
-    assert bottom > top  # paler towards the horizon
+    assert np.median(image[sky]) >= 250 and image[sky].min() >= 200
+
+
+def test_sunlight_is_ambient_plus_the_cosine_towards_the_sun() -> None:
+    light = sun_light((0.0, -1.0, -1.0), sun=1.0, ambient=0.1)  # up and towards -z, 45 degrees
+    cos45 = np.sqrt(0.5)
+    assert light == pytest.approx((0.1, 0.1, 0.1 + cos45, 0.1, 0.1 + cos45, 0.1))  # -x +x -y +y -z +z
+
+
+def test_the_urban_street_is_lit_by_face_and_blurred_by_the_lens() -> None:
+    """Unblurred, every lit pixel is the unlit texture times its face's sRGB gain
+    ``E ** (1 / 2.2)`` (clipped): the shaded side at 0.07 of the exposure's white is 0.30 as
+    bright; with the lens, the frame is the unblurred one through a Gaussian of 0.8 px."""
+    world = WORLDS["urban"](0)
+    pose = world.pose(1.0)
+    stage = world.stage(pose[:3, 3])
+    sharp = Renderer(world.camera("mono"), world.atlas)
+    unlit = sharp.render(Stage(stage.groups, sky_tile=stage.sky_tile), pose)[0].astype(np.float64)
+    lit = sharp.render(Stage(stage.groups, sky_tile=stage.sky_tile, light=stage.light, sky_light=stage.sky_light), pose)[0]
+    gains = np.asarray(stage.light) ** (1 / 2.2)
+    usable = (unlit > 40) & (unlit < 200) & (lit < 250)
+    ratio = lit[usable] / unlit[usable]
+    near = np.min(np.abs(ratio[:, None] / gains[None, :] - 1.0), axis=1)
+    assert np.mean(near < 0.03) > 0.97  # the rest: 8-bit rounding of dark texels
+    assert gains.min() == pytest.approx(0.07 ** (1 / 2.2)) and gains.max() < 1.0
+    assert np.mean(np.abs(ratio - gains.min()) < 0.02) > 0.1  # the shaded side: 13 % of these pixels
+    blurred = world.renderer.render(stage, pose)[0]
+    expected = cv2.GaussianBlur(sharp.render(stage, pose)[0], (0, 0), 0.8)
+    np.testing.assert_array_equal(blurred, expected)
 
 
 def test_atlas_levels_are_box_filtered_and_gutters_wrap() -> None:

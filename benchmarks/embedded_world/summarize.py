@@ -19,4 +19,6 @@ for path in sorted(glob.glob(f"{sys.argv[1]}/out_{sys.argv[2] if len(sys.argv) >
         b = outcome["boundary"]
         interval = "-".join(f"{v:.4g}" for v in sorted(b.get("interval") or []))
         estimate = b.get("estimate")
-        print(f"| {session} | {case.get('name')} | {outcome['verdict']} | {'-' if estimate is None else f'{estimate:.4g}'} | {interval} | {b.get('runs')} |")
+        print(
+            f"| {session} | {case.get('name')} | {outcome['verdict']} | {'-' if estimate is None else f'{estimate:.4g}'} | {interval} | {b.get('runs')} |"
+        )

@@ -1,4 +1,4 @@
-"""Weather and light on the synthetic urban street (60 stereo frames, 10 Hz, 10 m/s).
+"""Weather and light on the synthetic urban street (60 stereo frames, 10 Hz, 4 m/s).
 
 The default ``sal_dataset`` for fog, rain, snow and night is the urban street; the default
 ``sal_system`` is ORB-SLAM3 (stereo) when ``pyorbslam3`` is installed, else the built-in

@@ -99,6 +99,7 @@ class Faces:
         axis_st, sign_st, origin_st: ``(F, 2)`` texture axes, their signs and origins (m).
         density: ``(F, 2)`` texels per metre along ``s`` and ``t``.
         tile: atlas tile. box: index of the box each face belongs to.
+        number: face number ``2 * axis + side`` within its box (``FACE_NAMES``).
     """
 
     corners: np.ndarray
@@ -110,6 +111,7 @@ class Faces:
     density: np.ndarray
     tile: np.ndarray
     box: np.ndarray
+    number: np.ndarray
 
     def __len__(self) -> int:
         return len(self.axis)
@@ -178,6 +180,7 @@ def visible_faces(boxes: Boxes, eye: np.ndarray, inside: bool = False) -> Faces:
         density=boxes.density[box, face],
         tile=boxes.tiles[box, face],
         box=box,
+        number=face,
     )
 
 

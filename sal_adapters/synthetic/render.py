@@ -13,6 +13,12 @@
    ``m = |det J| / M``, ``rho = max(m, M / 2)`` (anisotropy up to 2:1 is kept sharp rather
    than blurred); level ``L`` when ``2**(L - 1/2) < rho <= 2**(L + 1/2)``. One ``cv2.remap``
    (bilinear) samples the atlas.
+4. Light (outdoor stages): the atlas holds reflectance as sRGB values; a face of outward
+   normal ``n`` receives ``E = ambient + sun * max(0, n . d)`` (``d`` towards the sun, relative
+   to the exposure), the sky ``sky_light``. As sRGB is close to a 2.2 power of linear light,
+   a linear gain ``E`` is an sRGB gain ``E ** (1 / 2.2)``; the result is clipped at 255
+   (surfaces and sky brighter than the exposure's white saturate, as in a real camera).
+5. Optics: the frame is blurred with a Gaussian point spread function of ``psf_sigma_px``.
 """
 
 from __future__ import annotations
@@ -33,7 +39,7 @@ from sal_adapters.synthetic.geometry import (
 )
 from sal_adapters.synthetic.textures import SKY_HORIZON, SKY_SLOPE
 
-__all__ = ["Renderer", "Stage"]
+__all__ = ["Renderer", "Stage", "sun_light"]
 
 #: Fixed-point fraction bits of polygon vertices given to ``cv2.fillConvexPoly``.
 SHIFT = 8
@@ -44,6 +50,8 @@ W_MIN = np.float32(1e-4)
 #: Pixels shaded at a time: per-pixel temporaries stay small (cache-resident, and below
 #: the allocator's mmap threshold, whose page faults would otherwise dominate).
 STRIP_PIXELS = 12288
+#: sRGB approximated as a power law: linear gain ``E`` is sRGB gain ``E ** (1 / GAMMA)``.
+GAMMA = 2.2
 #: ``rho**2`` thresholds between mip levels: ``2 * 4**L``.
 LEVEL_THRESHOLDS = tuple(2.0 * 4.0**level for level in range(LEVELS - 1))
 
@@ -59,19 +67,35 @@ class Stage:
         sky_tile: atlas tile of the sky gradient, or ``None`` (enclosed scenes).
         fog: ``(start_m, end_m)``: beyond ``start_m`` colours fade linearly into the horizon
             colour of the sky, fully at ``end_m``; ``None`` for no fog.
+        light: linear irradiance (1 = the exposure's white on a white surface) of the six face
+            numbers (``FACE_NAMES``) of solid boxes, or ``None`` for unlit texture colours.
+        sky_light: linear gain of the sky tile under ``light``.
     """
 
     groups: tuple[Boxes, ...]
     room: Boxes | None = None
     sky_tile: int | None = None
     fog: tuple[float, float] | None = None
+    light: tuple[float, float, float, float, float, float] | None = None
+    sky_light: float = 1.0
+
+
+def sun_light(towards_sun: tuple[float, float, float], sun: float, ambient: float) -> tuple[float, float, float, float, float, float]:
+    """``Stage.light`` of a sun in direction ``towards_sun`` (scene frame, normalised here)
+    of irradiance ``sun`` on a surface facing it, plus ``ambient`` (sky light) everywhere."""
+    d = np.asarray(towards_sun, np.float64) / np.linalg.norm(towards_sun)
+    normals = np.repeat(np.eye(3), 2, axis=0) * np.tile([-1.0, 1.0], 3)[:, None]
+    e0, e1, e2, e3, e4, e5 = (float(ambient + sun * max(0.0, float(n @ d))) for n in normals)
+    return e0, e1, e2, e3, e4, e5
 
 
 class Renderer:
-    """Renders RGB images and z-depth maps of stages for one pinhole camera (no distortion)."""
+    """Renders RGB images and z-depth maps of stages for one pinhole camera (no distortion)
+    whose optics blur with a Gaussian of ``psf_sigma_px`` pixels (0: none)."""
 
-    def __init__(self, camera: Camera, atlas: Atlas, near: float = 0.05):
+    def __init__(self, camera: Camera, atlas: Atlas, near: float = 0.05, psf_sigma_px: float = 0.0):
         self.camera = camera
+        self.psf_sigma_px = float(psf_sigma_px)
         self.atlas = atlas
         self.width, self.height = int(camera.width), int(camera.height)
         self.K = camera.K
@@ -156,10 +180,10 @@ class Renderer:
         return np.round(uv[:, :2] / uv[:, 2:] * (1 << SHIFT)).astype(np.int32)
 
     def _homographies(self, faces: Faces, inverse_depth: np.ndarray, stage: Stage, R: np.ndarray, eye: np.ndarray) -> np.ndarray:
-        """``(13, F + 1)`` float32 table: rows ``1/Z``, ``s/Z``, ``t/Z`` as linear forms in
-        ``(u, v, 1)`` (3 rows each), the tile's level-0 atlas origin ``X0``, ``Y0``, and the
-        bounds of ``1/Z`` (pixels filled just outside a polygon get its nearest valid depth).
-        Column 0 is the sky (or zeros)."""
+        """``(14, F + 1)`` float32 table: rows ``1/Z``, ``s/Z``, ``t/Z`` as linear forms in
+        ``(u, v, 1)`` (3 rows each), the tile's level-0 atlas origin ``X0``, ``Y0``, the
+        bounds of ``1/Z`` (pixels filled just outside a polygon get its nearest valid depth)
+        and the sRGB gain of the light. Column 0 is the sky (or zeros)."""
         G = R @ self.K_inv
         rows = np.arange(len(faces))
         A = G[faces.axis] / (faces.coord - eye[faces.axis])[:, None]
@@ -168,11 +192,15 @@ class Renderer:
             axis = faces.axis_st[:, k]
             scale = faces.density[:, k] * faces.sign_st[:, k]
             st.append(scale[:, None] * ((eye[axis] - faces.origin_st[rows, k])[:, None] * A + G[axis]))
-        table = np.zeros((len(faces) + 1, 13))
+        table = np.zeros((len(faces) + 1, 14))
         table[1:, 0:3], table[1:, 3:6], table[1:, 6:9] = A, st[0], st[1]
         table[1:, 9:11] = self.atlas.origin[faces.tile]
         table[1:, 11:13] = inverse_depth
         table[0, 11:13] = W_MIN
+        table[:, 13] = 1.0
+        if stage.light is not None:
+            table[1:, 13] = np.asarray(stage.light)[faces.number] ** (1 / GAMMA)
+            table[0, 13] = stage.sky_light ** (1 / GAMMA)
         if stage.sky_tile is not None:
             table[0, 12] = np.inf
             # s = TILE/2, t = SKY_HORIZON + SKY_SLOPE * dy / dz (tangent of the depression angle).
@@ -189,15 +217,18 @@ class Renderer:
         strip = max(1, STRIP_PIXELS // self.width)
         for r0 in range(0, self.height, strip):
             rows = slice(r0, min(r0 + strip, self.height))
-            rgb[rows], depth[rows] = self._shade_rows(ids[rows], table, self.v[rows])
+            rgb[rows], depth[rows] = self._shade_rows(ids[rows], table, self.v[rows], stage.light is not None)
         if stage.fog is not None and stage.sky_tile is not None:
-            self._fog(rgb, depth, stage.fog, stage.sky_tile)
+            self._fog(rgb, depth, stage.fog, stage.sky_tile, float(table[13, 0]))
+        if self.psf_sigma_px > 0:
+            cv2.GaussianBlur(rgb, (0, 0), self.psf_sigma_px, dst=rgb)
         return rgb, depth
 
-    def _shade_rows(self, ids: np.ndarray, table: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """RGB and depth of the rows with face ids ``ids`` and row coordinates ``v``."""
+    def _shade_rows(self, ids: np.ndarray, table: np.ndarray, v: np.ndarray, lit: bool) -> tuple[np.ndarray, np.ndarray]:
+        """RGB and depth of the rows with face ids ``ids`` and row coordinates ``v`` (with the
+        light's gain when ``lit``)."""
         index = ids.astype(np.intp)
-        a, b, c, sa, sb, sc, ta, tb, tc, x0, y0, w_lo, w_hi = (np.take(row, index) for row in table)
+        a, b, c, sa, sb, sc, ta, tb, tc, x0, y0, w_lo, w_hi = (np.take(row, index) for row in table[:13])
         u = self.u
         w = a * u + b * v + c
         np.clip(w, w_lo, w_hi, out=w)
@@ -218,12 +249,16 @@ class Renderer:
         x = (x0 + s) * scale + x_offset
         y = (y0 + t) * scale + y_offset
         rgb = cv2.remap(self.atlas.image, x, y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        if lit:
+            gain = np.take(table[13], index)
+            rgb = cv2.convertScaleAbs(rgb * gain[..., None])
         z[ids == 0] = 0.0
         return rgb, z
 
-    def _fog(self, rgb: np.ndarray, depth: np.ndarray, fog: tuple[float, float], sky_tile: int) -> None:
+    def _fog(self, rgb: np.ndarray, depth: np.ndarray, fog: tuple[float, float], sky_tile: int, sky_gain: float) -> None:
         """Blend pixels beyond the fog start (``fog``: start and end, m) into the horizon
-        colour of the sky tile, in place (within the bounding box of those pixels only)."""
+        colour of the sky tile (times its sRGB gain ``sky_gain``), in place (within the
+        bounding box of those pixels only)."""
         start, end = fog
         far = depth > start
         rows, cols = np.flatnonzero(far.any(axis=1)), np.flatnonzero(far.any(axis=0))
@@ -231,7 +266,7 @@ class Renderer:
             return
         box = np.s_[rows[0] : rows[-1] + 1, cols[0] : cols[-1] + 1]
         x0, y0 = self.atlas.origin[sky_tile]
-        horizon = self.atlas.image[int(y0 + SKY_HORIZON), int(x0 + TILE // 2)]
+        horizon = np.minimum(self.atlas.image[int(y0 + SKY_HORIZON), int(x0 + TILE // 2)] * sky_gain, 255)
         weight = np.clip((depth[box] - start) * np.float32(1.0 / (end - start)), 0.0, 1.0)
         haze = np.empty_like(rgb[box])
         haze[:] = horizon

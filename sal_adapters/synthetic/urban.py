@@ -1,4 +1,10 @@
-"""Urban street canyon, KITTI-like: a car-mounted stereo camera driving at about 10 m/s.
+"""Urban street, KITTI-like: a car-mounted stereo camera driving at about 4 m/s (14 km/h).
+
+It is made to look to feature tracking as the KITTI 07 excerpt does (benchmarks/RESULTS.md,
+issue 25): low buildings of 1-3 storeys, many set back, so the sky fills about 7 % of the
+frame; the sun from the left and behind, so the left side of the street lies in shade; the
+exposure is set for the sunlit road, so the sky saturates; a smooth road; and a lens whose
+point spread function is a Gaussian of 0.8 px.
 
 Scene frame: x right, y down, z along the street (m); the road surface is ``y = 0`` and the
 centre line ``x = 0``. The street is cut into blocks of ``BLOCK`` metres; block ``k`` is
@@ -15,7 +21,7 @@ import numpy as np
 
 from sal_adapters.synthetic.atlas import TILE
 from sal_adapters.synthetic.geometry import BoxBuilder, Boxes, Face
-from sal_adapters.synthetic.render import Stage
+from sal_adapters.synthetic.render import Stage, sun_light
 from sal_adapters.synthetic.urban_tiles import (
     CAR_COLOURS,
     FACADES,
@@ -37,9 +43,14 @@ KERB = 0.12  # kerb height (m)
 GROUND_FLOOR = 4.0  # height of shop fronts (m)
 LANE_X = 1.75  # centre of the right-hand driving lane (m)
 CAMERA_HEIGHT = 1.65  # camera above the road (m)
-SPEED = 10.0  # mean driving speed (m/s)
+SPEED = 4.0  # mean driving speed (m/s)
 AHEAD, BEHIND = 300.0, 2.0  # generated street around the camera (m)
 FOG = (90.0, 290.0)  # fog from ... to ... (m): hides where the street ends
+#: Sunlight: direction towards the sun (scene frame: from the left, behind, 40 deg high),
+#: irradiance on a surface facing it and sky light everywhere, relative to the exposure's
+#: white; the exposure is set for the sunlit road, so the sky saturates.
+SUN = sun_light((-0.6, -0.64, -0.45), sun=0.7, ambient=0.07)
+SKY_LIGHT = 12.0
 
 
 class UrbanWorld(World):
@@ -50,6 +61,7 @@ class UrbanWorld(World):
     intrinsics = (718.856, 718.856, 607.1928, 185.2157, 1240, 376)
     baseline = 0.54
     default_sensor = "stereo"
+    psf_sigma_px = 0.8
     TILE_NAMES = URBAN_TILES
 
     def __init__(self, seed: int):
@@ -78,7 +90,7 @@ class UrbanWorld(World):
         here = math.floor(eye[2] / BLOCK)
         blocks = range(math.floor((eye[2] - BEHIND) / BLOCK), math.floor((eye[2] + AHEAD) / BLOCK) + 1)
         order = sorted(blocks, key=lambda k: -abs(k - here))
-        return Stage(groups=tuple(self._block(k) for k in order), sky_tile=self.tiles["sky"], fog=FOG)
+        return Stage(groups=tuple(self._block(k) for k in order), sky_tile=self.tiles["sky"], fog=FOG, light=SUN, sky_light=SKY_LIGHT)
 
     def paint_tiles(self, rng: np.random.Generator) -> dict[str, np.ndarray]:
         return paint_urban(rng)
@@ -123,8 +135,8 @@ class UrbanWorld(World):
             if z1 - (z + width) < 3.0:
                 width = z1 - z
             r = rng.random()
-            setback = rng.uniform(12.0, 18.0) if r < 0.1 else rng.uniform(0.6, 2.5) if r < 0.35 else 0.0
-            storeys, storey = int(rng.integers(2, 8)), rng.uniform(3.0, 3.4)
+            setback = rng.uniform(12.0, 18.0) if r < 0.3 else rng.uniform(0.6, 2.5) if r < 0.6 else 0.0
+            storeys, storey = int(rng.integers(1, 4)), rng.uniform(3.0, 3.4)
             facade = self.tiles[f"facade{rng.integers(FACADES)}"]
             shop = self.tiles[f"shop{rng.integers(SHOPS)}"]
             gable = self.tiles[f"side{rng.integers(SIDES)}"]

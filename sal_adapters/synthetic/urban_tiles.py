@@ -87,22 +87,20 @@ def paint_urban(rng: np.random.Generator) -> dict[str, np.ndarray]:
 
 
 def _asphalt(rng: np.random.Generator) -> np.ndarray:
-    """Grey asphalt, 4 m per tile: mottling, stones, repaired patches and tar-sealed cracks
-    (dark, sharply bending lines: the corners feature detectors find on real roads)."""
+    """Grey asphalt, 4 m per tile: faint mottling and stones (worn fine aggregate), a repaired
+    patch and a few tar-sealed cracks, all of low contrast, as on a real road in daylight."""
     tile = canvas(vary(rng, (95, 95, 98), 8))
-    tile *= (1.0 + 0.08 * noise(rng, 8, 4))[..., None]
+    tile *= (1.0 + 0.05 * noise(rng, 8, 4))[..., None]
+    corners = rng.integers(10, 246, (2, 2))
+    x0, x1 = sorted(int(v) for v in corners[:, 0])
+    y0, y1 = sorted(int(v) for v in corners[:, 1])
+    tile[y0:y1, x0:x1] *= rng.choice([0.85, 1.12])
+    speckle(tile, rng, 700, [(112, 111, 108), (104, 103, 100), (82, 82, 85), (76, 76, 79)], (1, 2))
     for _ in range(2):
-        corners = rng.integers(10, 246, (2, 2))
-        x0, x1 = sorted(int(v) for v in corners[:, 0])
-        y0, y1 = sorted(int(v) for v in corners[:, 1])
-        tile[y0:y1, x0:x1] *= rng.choice([0.7, 1.25])
-        cv2.rectangle(tile, (x0, y0), (x1, y1), (40, 40, 42), 2)
-    speckle(tile, rng, 1800, [(180, 177, 170), (150, 147, 140), (45, 45, 48), (30, 30, 33)], (1, 2))
-    for _ in range(6):
         steps = rng.integers(-28, 29, (7, 2))
         points = np.cumsum(steps, axis=0) + rng.integers(30, 226, 2)
-        cv2.polylines(tile, [points.astype(np.int32)], False, (28, 28, 30), 3, cv2.LINE_AA)
-    return finish(tile + grain(rng, 6))
+        cv2.polylines(tile, [points.astype(np.int32)], False, (62, 62, 64), 2, cv2.LINE_AA)
+    return finish(tile + grain(rng, 3))
 
 
 def _paint(rng: np.random.Generator) -> np.ndarray:

@@ -48,6 +48,8 @@ class World(ABC):
     #: Depth units per metre recorded in the camera (TUM convention), or ``None``.
     depth_scale: ClassVar[float | None] = None
     default_sensor: ClassVar[str]
+    #: Standard deviation (px) of the lens's Gaussian point spread function; 0 for none.
+    psf_sigma_px: ClassVar[float] = 0.0
     TILE_NAMES: ClassVar[tuple[str, ...]]
 
     def __init__(self, seed: int):
@@ -80,7 +82,7 @@ class World(ABC):
     @cached_property
     def renderer(self) -> Renderer:
         """Renderer of the (left and right, same intrinsics) camera."""
-        return Renderer(self.camera("mono"), self.atlas)
+        return Renderer(self.camera("mono"), self.atlas, psf_sigma_px=self.psf_sigma_px)
 
     def camera(self, sensor: str) -> Camera:
         """Intrinsics of the left camera; ``stereo`` adds the right camera at +baseline (x)."""
