@@ -38,7 +38,7 @@ __all__ = ["RENDERER_VERSION", "FrameStore", "frame_stem", "rendered_frames_dir"
 
 #: Bump whenever rendered pixels or depth change: it is part of the cache folder name and
 #: of every rendered sequence's fingerprint.
-RENDERER_VERSION = 2
+RENDERER_VERSION = 3
 
 
 def rendered_frames_dir(scene: str, seed: int) -> Path:

@@ -49,7 +49,7 @@ FOG = (90.0, 290.0)  # fog from ... to ... (m): hides where the street ends
 #: Sunlight: direction towards the sun (scene frame: from the left, behind, 40 deg high),
 #: irradiance on a surface facing it and sky light everywhere, relative to the exposure's
 #: white; the exposure is set for the sunlit road, so the sky saturates.
-SUN = sun_light((-0.6, -0.64, -0.45), sun=0.7, ambient=0.07)
+SUN = sun_light((-0.6, -0.64, -0.45), sun=0.7, ambient=0.04)
 SKY_LIGHT = 12.0
 
 
