@@ -38,7 +38,7 @@ from sal_adapters.euroc_files import (
 )
 from sal_adapters.images import probe_image, write_image
 from sal_adapters.sequence import Frame, FrameRecord, Sequence
-from sal_adapters.trajectory import Trajectory, seconds_to_ns
+from sal_adapters.trajectory import Trajectory
 
 __all__ = ["EUROC", "GROUNDTRUTH_FRAMES", "EurocDataset"]
 
@@ -150,7 +150,7 @@ class EurocDataset(DatasetKind):
         stamps: list[int] = []
         for frame in frames:
             record = frame.record
-            ns = record.timestamp_ns if record.timestamp_ns is not None else seconds_to_ns(record.timestamp)
+            ns = record.time_ns
             if stamps and ns <= stamps[-1]:
                 raise DatasetError(
                     f"EuRoC names frames by their time in ns, which must increase: frame {record.index} at {ns} ns follows {stamps[-1]} ns",

@@ -15,7 +15,7 @@ import numpy as np
 from sal_adapters.camera import Camera
 from sal_adapters.common.errors import DatasetError
 from sal_adapters.images import Size, read_depth, read_image
-from sal_adapters.trajectory import Trajectory
+from sal_adapters.trajectory import Trajectory, seconds_to_ns
 
 __all__ = ["SENSORS", "Frame", "FrameRecord", "Sensor", "Sequence", "Source", "as_sensor"]
 
@@ -54,6 +54,11 @@ class FrameRecord:
     right: Source | None = None
     depth: Source | None = None
     timestamp_ns: int | None = None
+
+    @property
+    def time_ns(self) -> int:
+        """The capture time in integer ns: the dataset's own (EuRoC), else the nearest to ``timestamp``."""
+        return self.timestamp_ns if self.timestamp_ns is not None else seconds_to_ns(self.timestamp)
 
     @property
     def files(self) -> list[Path]:

@@ -56,7 +56,7 @@ def check_images(topic: list[tuple[int, Any]], seq: Sequence, right: bool = Fals
 
 def intrinsics(message: Any) -> np.ndarray:
     """K of a CameraInfo (ROS 1 spells it K, ROS 2 k)."""
-    return np.asarray(getattr(message, "K", None) if hasattr(message, "K") else message.k).reshape(3, 3)
+    return np.asarray(message.K if hasattr(message, "K") else message.k).reshape(3, 3)
 
 
 def check_groundtruth(topic: list[tuple[int, Any]], seq: Sequence) -> None:

@@ -31,16 +31,13 @@ from rosbags.rosbag2 import Writer as Ros2Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from scipy.spatial.transform import Rotation
 
+from pytest_sal.cli.arg_types import parse_key_values
 from sal_adapters import Sequence, open_dataset
 from sal_adapters.camera import Camera
+from sal_adapters.trajectory import seconds_to_ns
 
 FORMATS = {"ros1": ".bag", "sqlite3": "_sqlite3", "mcap": "_mcap"}
 TYPESTORES = {"ros1": Stores.ROS1_NOETIC, "sqlite3": Stores.ROS2_HUMBLE, "mcap": Stores.ROS2_HUMBLE}
-
-
-def stamp_ns(seconds: float, exact: int | None = None) -> int:
-    """A frame's time in integer nanoseconds (the dataset's own integer when it has one)."""
-    return int(exact) if exact is not None else int(round(seconds * 1e9))
 
 
 def header(types: Any, ns: int, frame_id: str, ros1: bool) -> Any:
@@ -108,12 +105,34 @@ def imu_rows(folder: Path) -> Iterator[tuple[int, list[float]]]:
             yield int(row[0]), [float(v) for v in row[1:7]]
 
 
+def imu_messages(types: Any, folder: Path, first: int, last: int, ros1: bool) -> Iterator[tuple[str, int, Any]]:
+    """(``/imu0``, ns, ``sensor_msgs/Imu``) of EuRoC's IMU samples from ``first`` to ``last`` ns."""
+    vector, quaternion = types["geometry_msgs/msg/Vector3"], types["geometry_msgs/msg/Quaternion"]
+    unknown = np.zeros(9)
+    unknown[0] = -1.0  # orientation not estimated (REP 145)
+    for ns, (wx, wy, wz, ax, ay, az) in imu_rows(folder):
+        if first <= ns <= last:
+            yield (
+                "/imu0",
+                ns,
+                types["sensor_msgs/msg/Imu"](
+                    header=header(types, ns, "imu0", ros1),
+                    orientation=quaternion(x=0.0, y=0.0, z=0.0, w=1.0),
+                    orientation_covariance=unknown,
+                    angular_velocity=vector(x=wx, y=wy, z=wz),
+                    angular_velocity_covariance=np.zeros(9),
+                    linear_acceleration=vector(x=ax, y=ay, z=az),
+                    linear_acceleration_covariance=np.zeros(9),
+                ),
+            )
+
+
 def messages(seq: Sequence, folder: Path | None, ros1: bool, types: Any) -> Iterator[tuple[str, int, Any]]:
     """(topic, ns, message) of the whole sequence, in no particular order."""
     grey = bool(seq.grayscale)
     camera = seq.camera
     for frame in seq:
-        ns = stamp_ns(frame.timestamp, frame.record.timestamp_ns)
+        ns = frame.record.time_ns
         yield "/cam0/image_raw", ns, image_message(types, frame.image, grey, header(types, ns, "cam0", ros1))
         yield "/cam0/camera_info", ns, camera_info_message(types, camera, header(types, ns, "cam0", ros1))
         if seq.sensor == "stereo" and frame.right is not None:
@@ -124,29 +143,10 @@ def messages(seq: Sequence, folder: Path | None, ros1: bool, types: Any) -> Iter
     truth = seq.groundtruth
     if truth is not None:
         for t, pose in zip(truth.timestamps, truth.matrices):
-            ns = stamp_ns(float(t))
+            ns = seconds_to_ns(t)
             yield "/tf", ns, tf_message(types, pose, header(types, ns, "world", ros1), "cam0")
     if folder is not None:
-        first, last = (stamp_ns(r.timestamp, r.timestamp_ns) for r in (seq.records[0], seq.records[-1]))
-        for ns, (wx, wy, wz, ax, ay, az) in imu_rows(folder):
-            if first <= ns <= last:
-                vector = types["geometry_msgs/msg/Vector3"]
-                quaternion = types["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)
-                unknown = np.zeros(9)
-                unknown[0] = -1.0  # orientation not estimated (REP 145)
-                yield (
-                    "/imu0",
-                    ns,
-                    types["sensor_msgs/msg/Imu"](
-                        header=header(types, ns, "imu0", ros1),
-                        orientation=quaternion,
-                        orientation_covariance=unknown,
-                        angular_velocity=vector(x=wx, y=wy, z=wz),
-                        angular_velocity_covariance=np.zeros(9),
-                        linear_acceleration=vector(x=ax, y=ay, z=az),
-                        linear_acceleration_covariance=np.zeros(9),
-                    ),
-                )
+        yield from imu_messages(types, folder, seq.records[0].time_ns, seq.records[-1].time_ns, ros1)
 
 
 MSGTYPES = {
@@ -196,14 +196,10 @@ def main() -> None:
     parser.add_argument("kind", help="dataset kind: kitti, euroc, tum, folder, synthetic")
     parser.add_argument("path", type=Path, help="the dataset folder")
     parser.add_argument("-o", "--out", type=Path, required=True, help="folder to write the bags into")
-    parser.add_argument("-O", "--option", action="append", default=[], help="dataset option KEY=VALUE (repeatable)")
+    parser.add_argument("-O", "--option", action="append", default=[], help="dataset option KEY=VALUE, JSON values (repeatable)")
     parser.add_argument("--formats", default="ros1,sqlite3,mcap", help="comma-separated: ros1, sqlite3, mcap")
     args = parser.parse_args()
-    options: dict[str, Any] = {}
-    for item in args.option:
-        key, _, value = item.partition("=")
-        options[key] = {"true": True, "false": False}.get(value.lower(), int(value) if value.isdigit() and key != "sequence" else value)
-    seq = open_dataset(args.kind, args.path, **options)
+    seq = open_dataset(args.kind, args.path, **parse_key_values(args.option, "--option"))
     args.out.mkdir(parents=True, exist_ok=True)
     for fmt in args.formats.split(","):
         target = args.out / f"{args.path.name}{FORMATS[fmt]}"

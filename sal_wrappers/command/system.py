@@ -56,7 +56,6 @@ import numpy as np
 from sal_adapters import Sequence, Trajectory, write_sequence
 from sal_adapters.common.errors import DatasetError
 from sal_adapters.common.textfiles import atomic_write_text, format_float
-from sal_adapters.trajectory import seconds_to_ns
 from sal_wrappers.base import WRITTEN_BEFORE_FAILURE, RunResult, SlamSystem, SlamSystemError, StopCheck, TrackState
 from sal_wrappers.child_process import describe_exit, log_tail
 from sal_wrappers.command.files import file_digest, program_files, tree_digest
@@ -250,7 +249,7 @@ class CommandSystem(SlamSystem):
         association) files beside it; returns the staged sequence's path."""
         staged = write_sequence(_staged_copy(sequence, mode, self.config.grayscale), workdir / self.config.stage_dir, layout=layout)
         atomic_write_text(workdir / "timestamps.txt", "".join(format_float(t) + "\n" for t in sequence.timestamps))
-        ns = [r.timestamp_ns if r.timestamp_ns is not None else seconds_to_ns(r.timestamp) for r in sequence.records]
+        ns = [r.time_ns for r in sequence.records]
         atomic_write_text(workdir / "timestamps_ns.txt", "".join(f"{n}\n" for n in ns))
         if "associations" in self.config.used:
             source = staged / "associations.txt"
