@@ -1,12 +1,10 @@
 """tools/make_rosbags.py (issue 26): the KITTI 07 and EuRoC V1_01 excerpts written as a ROS 1
-bag, a ROS 2 sqlite3 bag and a ROS 2 MCAP bag, read back with rosbags' own reader: every topic
+bag, a ROS 2 sqlite3 bag, a ROS 2 MCAP bag and a bare MCAP file, read back with rosbags' own reader: every topic
 has one message per frame (or per ground-truth pose, per IMU sample), the pixels and stamps are
 the folder adapters' to the bit, the calibration and the TF ground truth are theirs."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -15,18 +13,10 @@ import pytest
 from rosbags.highlevel import AnyReader
 from scipy.spatial.transform import Rotation
 
+from rosbag_files import make_bags
+
 from sal_adapters import Sequence, open_dataset
 from sal_adapters.common.errors import DatasetWarning
-
-TOOL = Path(__file__).resolve().parents[1] / "tools" / "make_rosbags.py"
-BAGS = ("{}.bag", "{}_sqlite3", "{}_mcap")
-
-
-def make_bags(kind: str, folder: Path, out: Path, *options: str) -> list[Path]:
-    """Run the tool as a user would; the paths of the three bags."""
-    arguments = [arg for option in options for arg in ("-O", option)]
-    subprocess.run([sys.executable, str(TOOL), kind, str(folder), "-o", str(out), *arguments], check=True, capture_output=True)
-    return [out / pattern.format(folder.name) for pattern in BAGS]
 
 
 def read_bag(path: Path) -> dict[str, list[tuple[int, Any]]]:
