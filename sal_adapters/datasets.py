@@ -65,6 +65,11 @@ class DatasetKind(ABC):
         into place when complete."""
         raise DatasetError(f"dataset kind {self.name!r} writes folders, not single files")
 
+    def details(self, sequence: Sequence) -> list[tuple[str, str]]:
+        """Extra ``(label, text)`` lines ``sal dataset info`` prints about where the frames come
+        from (a bag's topics, a video's codec); none by default."""
+        return []
+
     def option_names(self) -> list[str]:
         """Keyword options ``open`` accepts."""
         params = inspect.signature(self.open).parameters.values()
@@ -200,7 +205,8 @@ def _write_file(dataset: DatasetKind, sequence: Sequence, path: Path, frames: It
         raise DatasetError("output file exists; remove it or choose another name", path)
     with Replacement() as outputs:
         staging = outputs.entries(path.parent)
-        dataset.write_file(sequence, staging / path.name, frames)
+        with writing(path):
+            dataset.write_file(sequence, staging / path.name, frames)
     return path
 
 

@@ -35,6 +35,7 @@ from sal_adapters.sequence import Frame
 
 __all__ = [
     "CAMERA_FILE",
+    "DISTORTION_COUNTS",
     "checked_image",
     "fps_from_timestamps",
     "frame_file_stem",
@@ -50,8 +51,8 @@ __all__ = [
 CAMERA_FILE = "camera.yaml"
 
 _CAMERA_KEYS = ("fx", "fy", "cx", "cy", "width", "height", "distortion", "depth_scale")
-#: Coefficient counts OpenCV accepts for ``distortion``.
-_DISTORTION_COUNTS = (4, 5, 8, 12, 14)
+#: Coefficient counts OpenCV accepts for ``distortion`` (besides none).
+DISTORTION_COUNTS = (4, 5, 8, 12, 14)
 
 
 # -- camera.yaml ------------------------------------------------------------------------------
@@ -89,8 +90,8 @@ def read_camera_yaml(path: Path, width: int, height: int) -> Camera:
             if given != actual:
                 raise fail(f"{key} is {given:g} px but the images are {width}x{height} px", key)
     distortion = data.get("distortion") or ()
-    if not isinstance(distortion, list | tuple) or len(distortion) not in (0, *_DISTORTION_COUNTS):
-        counts = ", ".join(map(str, _DISTORTION_COUNTS))
+    if not isinstance(distortion, list | tuple) or len(distortion) not in (0, *DISTORTION_COUNTS):
+        counts = ", ".join(map(str, DISTORTION_COUNTS))
         raise fail(f"distortion must be a list of {counts} numbers (k1 k2 p1 p2 [k3 ...]) or empty", "distortion")
     values["distortion"] = tuple(_number(v, failing("distortion")) for v in distortion)
     scale = data.get("depth_scale")
@@ -169,7 +170,7 @@ def select_camera(
     else:
         camera = fallback()
     if distortion is not None:
-        coeffs = parse_numbers(distortion, "distortion (k1 k2 p1 p2 [k3 ...])", (0, *_DISTORTION_COUNTS))
+        coeffs = parse_numbers(distortion, "distortion (k1 k2 p1 p2 [k3 ...])", (0, *DISTORTION_COUNTS))
         camera = replace(camera, distortion=coeffs)
     return camera
 

@@ -305,3 +305,49 @@ def test_missing_calibration_names_the_options(tmp_path: Path) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert seq.groundtruth is None
+
+
+def test_nan_calibration_and_poses_name_the_topic(tmp_path: Path) -> None:
+    nan_camera = info(1)
+    nan_camera.k[0] = np.nan
+    bag = write_ros2_bag(
+        tmp_path / "nan",
+        [
+            ("/cam/image_raw", "sensor_msgs/msg/Image", 1, image(1, frame_pixels(0))),
+            ("/cam/camera_info", "sensor_msgs/msg/CameraInfo", 1, nan_camera),
+        ],
+    )
+    with pytest.raises(DatasetError, match="camera of /cam/image_raw: camera fx must be > 0 px"):
+        open_dataset("rosbag", bag)
+    broken = np.eye(4)
+    broken[0, 3] = np.inf
+    extra = [
+        ("/tf", "tf2_msgs/msg/TFMessage", ns, tf(ns, broken if ns == 1_300_000_000 else pose_at(ns * 1e-9), "odom", "cam"))
+        for ns in range(1_000_000_000, 2_000_000_000, 100_000_000)
+    ]
+    with pytest.raises(DatasetError, match=r"topic /tf: message 3: a pose with a non-finite position"):
+        open_dataset("rosbag", camera_bag(tmp_path / "inf", extra=extra))
+
+
+def test_an_image_shorter_than_its_size_says_so_when_decoded(tmp_path: Path) -> None:
+    def short(number: int, ns: int) -> object:
+        message = image(ns, frame_pixels(number))
+        return message if number != 2 else type(message)(**{**message.__dict__, "data": message.data[:100]})
+
+    seq = open_dataset("rosbag", camera_bag(tmp_path / "short", frames=4, make=short))
+    seq[1].image
+    with pytest.raises(DatasetError, match=r"topic /cam/image_raw: an image of 64x48 px rgb8 holds 100 bytes with step 192; expected 9216"):
+        seq[2].image
+
+
+def test_a_write_that_fails_midway_leaves_nothing_behind(kitti_bags: list[Path], tmp_path: Path) -> None:
+    clean = open_dataset("rosbag", kitti_bags[3])
+
+    def broken() -> np.ndarray:
+        raise OSError(28, "No space left on device")
+
+    records = list(clean.records)
+    records[5] = type(records[5])(**{**records[5].__dict__, "image": broken})
+    with pytest.raises(OSError, match="No space left on device"):
+        write_sequence(clean.replace(records=records), tmp_path / "out.mcap")
+    assert list(tmp_path.iterdir()) == []  # no half-written bag, no staging folder

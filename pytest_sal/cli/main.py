@@ -179,6 +179,8 @@ def _run_dataset_info(args: argparse.Namespace) -> int:
     gt = sequence.groundtruth
     gt_text = "none" if gt is None else f"{len(gt)} poses, path {gt.path_length():.2f} m"
     print(f"  groundtruth  {gt_text}")
+    for label, text in DATASETS.get(args.kind).details(sequence):
+        print(f"  {label:12s} {text}")
     return 0
 
 

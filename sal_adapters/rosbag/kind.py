@@ -32,6 +32,7 @@ __all__ = ["ROSBAG", "RosbagDataset"]
 
 CAMERA_INFO = ("sensor_msgs/msg/CameraInfo",)
 STAMPS = ("header", "log")
+FORMAT_NAMES = {"ros1": "ROS 1 bag", "sqlite3": "ROS 2 bag (sqlite3)", "mcap": "ROS 2 bag (MCAP)", "mcap_file": "MCAP file"}
 
 
 class RosbagDataset(DatasetKind):
@@ -58,7 +59,6 @@ class RosbagDataset(DatasetKind):
         pair_tolerance_s: largest stamp difference (s) of a stereo or RGB-D pair.
         stamps: ``header`` (capture time) or ``log`` (recording time).
     """
-
 
     name = "rosbag"
     description = (
@@ -132,9 +132,30 @@ class RosbagDataset(DatasetKind):
             groundtruth=read_groundtruth(bag, groundtruth_topic, frames, camera_frame),  # type: ignore[arg-type]
             grayscale=grey,
             source=path,
-            meta={"format": bag.format, "options": {**options, "image_topic": image_topic}, "excerpt": None},
+            meta={
+                "format": bag.format,
+                "options": {
+                    **options,
+                    "image_topic": image_topic,
+                    **({"camera_info_topic": camera_info_topic} if camera_info_topic else {}),
+                },
+                "excerpt": None,
+            },
             content_key=_content_key(path),
         )
+
+    def details(self, sequence: Sequence) -> list[tuple[str, str]]:
+        """The bag's format and every topic: type, message count, and what the sequence reads
+        from it."""
+        assert sequence.source is not None
+        bag = open_bag(sequence.source)
+        options = sequence.meta.get("options", {})
+        roles = {options.get(k): k.removesuffix("_topic") for k in ("image_topic", "right_image_topic", "depth_topic", "camera_info_topic")}
+        lines = [("format", FORMAT_NAMES[bag.format])]
+        for topic, msgtype in bag.topics().items():
+            role = f"  <- {roles[topic]}" if topic in roles else ""
+            lines.append(("topic", f"{topic}  {msgtype}  {bag.message_count(topic)} messages{role}"))
+        return lines
 
     def write(self, sequence: Sequence, out_dir: Path, frames: Iterable[Frame]) -> Path:
         """Write the bag under ``out_dir`` in the source bag's format (a sequence from another

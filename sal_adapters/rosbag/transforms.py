@@ -59,9 +59,12 @@ class TransformTree:
             if topic not in bag.topics():
                 continue
             bag.require(topic, "groundtruth_topic", (TF_TYPE,))
-            for _, raw in bag.raw_messages(topic):
+            for number, (_, raw) in enumerate(bag.raw_messages(topic)):
                 for stamped in bag.deserialize(raw, topic).transforms:
-                    self._add(stamped, static=topic == "/tf_static")
+                    try:
+                        self._add(stamped, static=topic == "/tf_static")
+                    except ValueError as exc:
+                        raise DatasetError(f"topic {topic}: message {number}: {exc}", bag.path) from None
 
     def _add(self, stamped: Any, static: bool) -> None:
         parent, child = stamped.header.frame_id.lstrip("/"), stamped.child_frame_id.lstrip("/")
@@ -171,12 +174,15 @@ def _pose_topic(bag: Bag, topic: str, frames: tuple[str, str] | None) -> Traject
     """Odometry or PoseStamped poses, moved to ``frames[1]`` by a static TF chain when it is
     not the messages' own child frame."""
     times, poses, child = [], [], ""
-    for _, raw in bag.raw_messages(topic):
+    for number, (_, raw) in enumerate(bag.raw_messages(topic)):
         message = bag.deserialize(raw, topic)
         pose = message.pose.pose if hasattr(message, "child_frame_id") else message.pose
         child = getattr(message, "child_frame_id", "").lstrip("/")
         times.append(_seconds(message.header.stamp))
-        poses.append(_matrix(pose.position, pose.orientation))
+        try:
+            poses.append(_matrix(pose.position, pose.orientation))
+        except ValueError as exc:
+            raise DatasetError(f"topic {topic}: message {number}: {exc}", bag.path) from None
     if not times:
         raise DatasetError(f"groundtruth_topic={topic!r} holds no messages", bag.path)
     order = np.argsort(times, kind="stable")
@@ -194,11 +200,12 @@ def _seconds(stamp: Any) -> float:
 def _matrix(translation: Any, rotation: Any) -> np.ndarray:
     """4x4 of a ROS translation (Vector3 or Point) and quaternion (x, y, z, w)."""
     quaternion = np.array([rotation.x, rotation.y, rotation.z, rotation.w], np.float64)
-    if not np.all(np.isfinite(quaternion)) or np.linalg.norm(quaternion) < 1e-9:
-        raise ValueError(f"invalid quaternion {quaternion.tolist()}")
+    position = np.array([translation.x, translation.y, translation.z], np.float64)
+    if not np.all(np.isfinite(quaternion)) or np.linalg.norm(quaternion) < 1e-9 or not np.all(np.isfinite(position)):
+        raise ValueError(f"a pose with a non-finite position or an invalid quaternion: {position.tolist()}, {quaternion.tolist()}")
     pose = np.eye(4)
     pose[:3, :3] = Rotation.from_quat(quaternion).as_matrix()
-    pose[:3, 3] = [translation.x, translation.y, translation.z]
+    pose[:3, 3] = position
     return pose
 
 
