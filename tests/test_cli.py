@@ -58,7 +58,7 @@ def test_dataset_list_names_every_builtin_kind(capsys):
         (["dataset", "info", "kitti", "/no/such/folder"], "sal: error: /no/such/folder: kitti dataset folder not found"),
         (
             ["dataset", "info", "nosuchkind", "/tmp"],
-            "sal: error: unknown dataset kind 'nosuchkind'; known: euroc, folder, kitti, synthetic, tum (entry-point group 'sal.datasets')",
+            "sal: error: unknown dataset kind 'nosuchkind'; known: euroc, folder, kitti, rosbag, synthetic, tum, video (entry-point group 'sal.datasets')",
         ),
         (
             ["dataset", "info", "kitti", "/tmp", "-o", "colour=true"],

@@ -10,10 +10,9 @@ from typing import Any
 
 import numpy as np
 import pytest
+from rosbag_files import make_bags
 from rosbags.highlevel import AnyReader
 from scipy.spatial.transform import Rotation
-
-from rosbag_files import make_bags
 
 from sal_adapters import Sequence, open_dataset
 from sal_adapters.common.errors import DatasetWarning

@@ -2,10 +2,10 @@
 the folder does, and a requirement's search runs end to end on that bag and on an H.264 video
 made from the same excerpt (``write_sequence(kitti, "kitti07.mp4")``).
 
-Measured on the 2-core workplace machine (140 frames, 2000 features, paced at 9.6 Hz): the
-folder and the MCAP bag both track 136/140 frames with a Sim(3) ATE of 0.24-0.27 m over 78 m
-(the bag's frames are the folder's to the bit, so the two differ only by ORB-SLAM3's own
-run-to-run noise); see tests/test_orbslam3.py for the folder's spread.
+Measured on the 2-core workplace machine (140 frames, 2000 features, paced at 9.6 Hz, three
+runs each): the folder tracks 136/140 frames in every run with a Sim(3) ATE of 0.245, 0.282,
+0.279 m over 78 m, the MCAP bag 136/140 with 0.258, 0.261, 0.290 m. The bag's frames are the
+folder's to the bit, so the two differ only by ORB-SLAM3's own run-to-run noise.
 """
 
 from __future__ import annotations

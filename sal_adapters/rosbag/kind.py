@@ -160,19 +160,25 @@ class RosbagDataset(DatasetKind):
     def write(self, sequence: Sequence, out_dir: Path, frames: Iterable[Frame]) -> Path:
         """Write the bag under ``out_dir`` in the source bag's format (a sequence from another
         kind: a ROS 2 MCAP bag folder) and return its path."""
-        from sal_adapters.rosbag.writer import write_bag
-
         fmt = str(sequence.meta.get("format", "mcap")) if sequence.kind == self.name else "mcap"
         stem = re.sub(r"[^A-Za-z0-9._-]+", "_", sequence.name.rsplit("/", 1)[-1]).strip("._") or "sequence"
         target = out_dir / (stem + {"ros1": ".bag", "mcap_file": ".mcap"}.get(fmt, ""))
-        write_bag(sequence, target, fmt, frames)
+        self._write(sequence, target, fmt, frames)
         return target
 
     def write_file(self, sequence: Sequence, path: Path, frames: Iterable[Frame]) -> None:
         """Write ``path``: a ROS 1 bag (``.bag``) or a bare MCAP file (``.mcap``)."""
+        self._write(sequence, path, "ros1" if path.suffix.lower() == ".bag" else "mcap_file", frames)
+
+    def _write(self, sequence: Sequence, target: Path, fmt: str, frames: Iterable[Frame]) -> None:
+        """A copy of the source bag when ``sequence`` came from one of the same family (ROS 1
+        or ROS 2), else a new bag (``sal_adapters.rosbag.writer``)."""
         from sal_adapters.rosbag.writer import write_bag
 
-        write_bag(sequence, path, "ros1" if path.suffix.lower() == ".bag" else "mcap_file", frames)
+        clean = None
+        if sequence.kind == self.name and sequence.source is not None and (sequence.meta.get("format") == "ros1") == (fmt == "ros1"):
+            clean = self.open(sequence.source, **sequence.meta.get("options", {}))
+        write_bag(sequence, target, fmt, frames, clean=clean)
 
 
 class _Topic:

@@ -34,13 +34,16 @@ __all__ = ["write_bag", "write_messages"]
 Item = tuple[int, str, Any]
 
 
-def write_bag(sequence: Sequence, target: Path, fmt: str, frames: Iterable[Frame], extra: Iterable[Item] = ()) -> None:
+def write_bag(
+    sequence: Sequence, target: Path, fmt: str, frames: Iterable[Frame], clean: Sequence | None = None, extra: Iterable[Item] = ()
+) -> None:
     """Write ``sequence`` as a bag of format ``fmt`` (``ros1``, ``sqlite3``, ``mcap``,
-    ``mcap_file``) at ``target``, taking the pixels from ``frames``; ``extra`` adds messages
-    (``FRESH_TOPICS`` types, in time order) to a new bag."""
-    source_fmt = sequence.meta.get("format") if sequence.kind == "rosbag" else None
-    if source_fmt is not None and (source_fmt == "ros1") == (fmt == "ros1"):
-        _copy_through(sequence, target, fmt, frames)
+    ``mcap_file``) at ``target``, taking the pixels from ``frames``: a copy of its source bag
+    when ``clean`` (the source bag opened as ``sequence`` was, before any perturbation) is
+    given, else a new bag to which ``extra`` adds messages (``FRESH_TOPICS`` types, in time
+    order)."""
+    if clean is not None:
+        _copy_through(sequence, clean, target, fmt, frames)
     else:
         store = typestore(fmt == "ros1")
         write_messages(
@@ -87,12 +90,9 @@ def _fresh(sequence: Sequence, frames: Iterable[Frame], types: Any, ros1: bool) 
         pending = next(gt, None)
 
 
-def _copy_through(sequence: Sequence, target: Path, fmt: str, frames: Iterable[Frame]) -> None:
+def _copy_through(sequence: Sequence, clean: Sequence, target: Path, fmt: str, frames: Iterable[Frame]) -> None:
     """The source bag with the sequence's frames on its image topics (see the module text)."""
-    from sal_adapters.rosbag.kind import ROSBAG
-
     assert sequence.source is not None
-    clean = ROSBAG.open(sequence.source, **sequence.meta.get("options", {}))
     roles: dict[MessageRef, tuple[int, str]] = {}
     for record in clean.records:
         for role, frame_source in (("image", record.image), ("right", record.right), ("depth", record.depth)):
