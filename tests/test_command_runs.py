@@ -198,7 +198,10 @@ def test_exit_127_from_a_prefix(tiny, tmp_path):
         ({"argv": ["slam"], "settings": "/no/such.yaml"}, "settings template not found: /no/such.yaml"),
         ({"argv": ["slam"], "output_format": "csv"}, "output_format 'csv' is not known; allowed: tum, kitti, euroc, json"),
         ({"argv": ["slam"], "time_unit": "min"}, "time_unit 'min' is not known"),
-        ({"argv": ["slam"], "layout": "kiti"}, "layout 'kiti' is not a dataset layout; allowed: euroc, folder, kitti, rosbag, synthetic, tum, video"),
+        (
+            {"argv": ["slam"], "layout": "kiti"},
+            "layout 'kiti' is not a dataset layout; allowed: euroc, folder, kitti, rosbag, synthetic, tum, video",
+        ),
         ({"argv": ["slam"], "layout": "kitti", "sensor": "rgbd"}, "the kitti layout cannot hold rgbd data"),
         ({"argv": ["slam"], "sensor": "lidar"}, "sensor 'lidar' is not known"),
         ({"argv": ["slam", "{output}"], "output": "logs/*.txt"}, "is a glob pattern"),

@@ -9,7 +9,7 @@ def test_entry_point_groups_hold_the_builtins():
     pytest11 = {ep.name: ep.value for ep in entry_points(group="pytest11")}
     assert pytest11["sal"] == "pytest_sal.plugin"
     datasets = {ep.name for ep in entry_points(group="sal.datasets")}
-    assert datasets == {"kitti", "tum", "euroc", "folder", "synthetic"}
+    assert datasets == {"kitti", "tum", "euroc", "folder", "synthetic", "rosbag", "video"}
 
 
 def test_plugin_is_loaded_and_marker_registered(pytester):

@@ -133,6 +133,12 @@ def test_an_excerpt_is_written_with_the_other_topics_of_its_time_span(euroc_bags
     assert found["/imu0"] == pytest.approx(0.45 * 200, abs=2)
 
 
+def test_a_bag_is_not_written_back_across_ros_versions(kitti_bags: list[Path], tmp_path: Path) -> None:
+    with pytest.raises(DatasetError, match=r"comes from a ROS 1 bag and is written back as one .*: name the output .bag"):
+        write_sequence(open_dataset("rosbag", kitti_bags[0]), tmp_path / "out.mcap")
+    assert not (tmp_path / "out.mcap").exists()
+
+
 def test_a_folder_dataset_is_written_as_a_new_bag(kitti: Sequence, tmp_path: Path) -> None:
     out = write_sequence(kitti.select(range(5)), tmp_path / "kitti.bag")
     back = open_dataset("rosbag", out)

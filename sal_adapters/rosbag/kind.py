@@ -176,7 +176,14 @@ class RosbagDataset(DatasetKind):
         from sal_adapters.rosbag.writer import write_bag
 
         clean = None
-        if sequence.kind == self.name and sequence.source is not None and (sequence.meta.get("format") == "ros1") == (fmt == "ros1"):
+        if sequence.kind == self.name and sequence.source is not None:
+            if (sequence.meta.get("format") == "ros1") != (fmt == "ros1"):
+                source, wanted = ("a ROS 1 bag", ".bag") if sequence.meta.get("format") == "ros1" else ("a ROS 2 bag", ".mcap or a folder")
+                raise DatasetError(
+                    f"{sequence.name} comes from {source} and is written back as one (its other topics keep their "
+                    f"serialisation): name the output {wanted}, or convert the bag first (rosbags-convert)",
+                    target.name,
+                )
             clean = self.open(sequence.source, **sequence.meta.get("options", {}))
         write_bag(sequence, target, fmt, frames, clean=clean)
 
