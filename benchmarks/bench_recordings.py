@@ -11,7 +11,8 @@ memory (``ru_maxrss``) and its time:
   ``rosbags.image.message_to_cvimage(msg, "rgb8")`` per message (a hand-written export);
 * ``video kind``: ``open_dataset("video", ...)`` then every frame in order;
 * ``PyAV loop`` (peer): ``container.decode(video=0)`` and ``frame.to_ndarray(format="rgb24")``;
-* ``folder``: the KITTI excerpt itself (``open_dataset("kitti", ...)``, 140 PNG frames) for scale.
+* ``folder``: the KITTI excerpt itself (``open_dataset("kitti", ...)``, 140 PNG frames) for scale;
+* ``imports only``: the interpreter with the libraries loaded, the floor of peak memory.
 
     .venv/bin/python benchmarks/bench_recordings.py [--frames 2100] [--data ../shared/data]
 """
@@ -29,6 +30,9 @@ from pathlib import Path
 from sal_adapters import open_dataset, write_sequence
 
 READERS = {
+    "imports only": """
+opened = time.perf_counter()
+""",
     "rosbag kind": """
 seq = open_dataset("rosbag", PATH)
 opened = time.perf_counter()
@@ -107,6 +111,7 @@ def main() -> None:
         )
         print("| reader | frames | open (s) | read (frames/s) | peak memory (MB) |\n|---|---:|---:|---:|---:|")
         for reader, path, frames in (
+            ("imports only", bag, len(long)),
             ("rosbag kind", bag, len(long)),
             ("rosbags loop", bag, len(long)),
             ("video kind", video, len(long)),
@@ -114,7 +119,8 @@ def main() -> None:
             ("folder", args.data / "kitti", len(kitti)),
         ):
             m = measure(reader, path)
-            print(f"| {reader} | {frames} | {m['open_s']:.2f} | {frames / m['read_s']:.0f} | {m['peak_mb']:.0f} |", flush=True)
+            rate = "-" if reader == "imports only" else f"{frames / m['read_s']:.0f}"
+            print(f"| {reader} | {frames} | {m['open_s']:.2f} | {rate} | {m['peak_mb']:.0f} |", flush=True)
 
 
 if __name__ == "__main__":
