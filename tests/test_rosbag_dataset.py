@@ -398,3 +398,19 @@ def test_a_command_system_replays_the_perturbed_bag(kitti_bags: list[Path], tmp_
     assert result.trajectory is not None and len(result.trajectory) == len(perturbed) < len(clean)
     np.testing.assert_allclose(result.trajectory.timestamps, perturbed.timestamps, atol=1e-9)
     assert result.trajectory.allclose(clean.groundtruth.select([int(i) for i in perturbed.indices]), atol=1e-9)
+
+
+def test_groundtruth_from_pose_stamped(tmp_path: Path) -> None:
+    def stamped(ns: int) -> object:
+        pose = pose_at(ns * 1e-9)
+        x, y, z, w = Rotation.from_matrix(pose[:3, :3]).as_quat()
+        geometry = TYPES["geometry_msgs/msg/Pose"](
+            position=TYPES["geometry_msgs/msg/Point"](x=pose[0, 3], y=pose[1, 3], z=pose[2, 3]),
+            orientation=TYPES["geometry_msgs/msg/Quaternion"](x=x, y=y, z=z, w=w),
+        )
+        return TYPES["geometry_msgs/msg/PoseStamped"](header=header(TYPES, ns, "world", False), pose=geometry)
+
+    extra = [("/mocap/pose", "geometry_msgs/msg/PoseStamped", ns, stamped(ns)) for ns in range(1_000_000_000, 2_000_000_000, 10_000_000)]
+    truth = open_dataset("rosbag", camera_bag(tmp_path / "mocap", extra=extra)).groundtruth
+    assert truth is not None and len(truth) == 100
+    assert np.allclose(truth.matrices[42], pose_at(truth.timestamps[42]))

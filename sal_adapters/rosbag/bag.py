@@ -8,6 +8,7 @@ Every error is one ``DatasetError`` naming the bag (and the topic where one is c
 
 from __future__ import annotations
 
+import atexit
 import os
 import struct
 import threading
@@ -179,6 +180,14 @@ class Bag:
 
 _OPEN: dict[tuple[int, str, int], Bag] = {}
 _OPEN_LOCK = threading.Lock()
+
+
+@atexit.register
+def _close_all() -> None:
+    """Close the bags this process opened (at interpreter exit)."""
+    for key, bag in list(_OPEN.items()):
+        if key[0] == os.getpid():
+            bag.close()
 
 
 def open_bag(path: Path) -> Bag:
