@@ -120,6 +120,11 @@ def test_out_of_range_value_names_the_path_unit_and_range(tmp_path: Path) -> Non
 def test_missing_dataset_path_and_unknown_kind(tmp_path: Path) -> None:
     config = base_config(tmp_path, dataset={"type": "kitti", "path": str(tmp_path / "nowhere"), "sequence": "07"})
     assert f"dataset.path: '{tmp_path / 'nowhere'}' does not exist; give the dataset folder" in error_of(tmp_path, config)
+    (tmp_path / "run.mcap").write_bytes(b"")
+    config = base_config(tmp_path, dataset={"type": "kitti", "path": str(tmp_path / "run.mcap")})
+    assert f"dataset.path: '{tmp_path / 'run.mcap'}' is not a folder; give the dataset folder" in error_of(tmp_path, config)
+    config = base_config(tmp_path, dataset={"type": "video", "path": str(tmp_path / "clip.mp4")})
+    assert f"dataset.path: '{tmp_path / 'clip.mp4'}' does not exist; give the dataset file or folder" in error_of(tmp_path, config)
     config = base_config(tmp_path, dataset={"type": "tum"})
     assert "dataset.path: is required for dataset kind 'tum'" in error_of(tmp_path, config)
     config = base_config(tmp_path, dataset={"type": "kitty", "path": "."})

@@ -414,3 +414,19 @@ def test_groundtruth_from_pose_stamped(tmp_path: Path) -> None:
     truth = open_dataset("rosbag", camera_bag(tmp_path / "mocap", extra=extra)).groundtruth
     assert truth is not None and len(truth) == 100
     assert np.allclose(truth.matrices[42], pose_at(truth.timestamps[42]))
+
+
+def test_sal_perturb_writes_each_perturbed_bag_in_the_source_format(kitti_bags: list[Path], tmp_path: Path) -> None:
+    from pytest_sal.cli.main import main
+
+    config = tmp_path / "bag.yaml"
+    config.write_text(
+        f"experiment: {{name: bag_night, seed: 1}}\n"
+        f"dataset: {{type: rosbag, path: '{kitti_bags[3]}', max_frames: 6}}\n"
+        "perturbations: [{name: dusk, type: night, parameters: {illuminance_lux: 30}}]\n"
+        f"output: {{base_dir: '{tmp_path / 'out'}'}}\n"
+    )
+    assert main(["perturb", str(config), "--cache-dir", str(tmp_path / "cache")]) == 0
+    (bag,) = (tmp_path / "out" / "bag_night" / "images" / "dusk").glob("*.mcap")
+    found = counts(bag)
+    assert found["/cam0/image_raw"] == found["/tf"] == found["/cam0/camera_info"] == 6  # other topics over the excerpt's span

@@ -109,11 +109,13 @@ class _Parser(ValueChecks):
         folder = None if d.get("path") is None else self.folder(d["path"], "dataset.path")
         if folder is not None:
             try:
-                found = "" if folder.is_dir() else "is not a folder" if folder.exists() else "does not exist"
+                usable = folder.is_dir() or (dataset_kind.opens_files and folder.is_file())
+                found = "" if usable else "is not a folder" if folder.exists() else "does not exist"
             except OSError as exc:  # stat refused (a folder above is unreadable)
                 found = f"cannot be read ({exc.strerror})"
             if found:
-                raise self.error("dataset.path", f"{quote(str(folder), PATH_CHARS)} {found}; give the dataset folder")
+                what = "the dataset file or folder" if dataset_kind.opens_files else "the dataset folder"
+                raise self.error("dataset.path", f"{quote(str(folder), PATH_CHARS)} {found}; give {what}")
         elif kind != "synthetic":
             raise self.error("dataset.path", f"is required for dataset kind {quote(kind)}")
         sequence = d.get("sequence")
