@@ -41,8 +41,12 @@ def import_av() -> Any:
     """The ``av`` module (PyAV); ``DatasetError`` saying how to install it when it is missing."""
     try:
         import av
+        import av.logging
     except ImportError as exc:
         raise DatasetError(f"the video dataset kind needs PyAV: pip install 'pytest-sal[video]' ({exc})") from None
+    level = av.logging.get_level()
+    if level is not None and level > av.logging.PANIC:  # PyAV < 13 prints FFmpeg's log; our errors say what went wrong
+        av.logging.set_level(av.logging.PANIC)
     return av
 
 
@@ -247,7 +251,7 @@ class _Decoder:
             for key, frame in self.frames:
                 self.last = key
                 if key == want.pts:
-                    return _rgb(frame, want.grey)
+                    return _rgb(frame, want.grey, self.stream.codec_context.color_range)
                 if key > want.pts:
                     break
         except av.FFmpegError as exc:
@@ -278,15 +282,17 @@ class _Decoder:
             position += 1
 
 
-def _rgb(frame: Any, grey: bool) -> np.ndarray:
-    """A decoded frame as HxWx3 uint8 RGB, converted with the stream's colour range; a grey
-    frame's luma exactly (no range scaling when the stream is full range) in all channels."""
+def _rgb(frame: Any, grey: bool, stream_range: int | None) -> np.ndarray:
+    """A decoded frame as HxWx3 uint8 RGB, converted with its colour range (PyAV < 13 leaves
+    the frame's unspecified: the stream's, else MPEG's limited range); a grey frame's luma
+    exactly (no range scaling when the stream is full range) in all channels."""
     from av.video.reformatter import ColorRange
 
+    source_range = int(getattr(frame, "color_range", 0) or stream_range or ColorRange.MPEG)
     if grey:
-        luma = frame.reformat(format="gray", src_color_range=frame.color_range, dst_color_range=ColorRange.JPEG).to_ndarray()
+        luma = frame.reformat(format="gray", src_color_range=source_range, dst_color_range=ColorRange.JPEG).to_ndarray()
         return np.repeat(luma[:, :, None], 3, axis=2)
-    return np.ascontiguousarray(frame.reformat(format="rgb24", src_color_range=frame.color_range).to_ndarray())
+    return np.ascontiguousarray(frame.reformat(format="rgb24", src_color_range=source_range).to_ndarray())
 
 
 class _DecoderCache:

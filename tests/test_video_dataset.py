@@ -224,7 +224,8 @@ def _faststart_half(source: Path, target: Path) -> None:
     """The first half of ``source`` remuxed with its index at the start (a cut-off download)."""
     whole = target.with_name("whole.mp4")
     with av.open(str(source)) as src, av.open(str(whole), "w", options={"movflags": "faststart"}) as out:
-        stream = out.add_stream_from_template(src.streams.video[0])
+        template = src.streams.video[0]  # PyAV 12 has add_stream(template=), 14 on add_stream_from_template
+        stream = out.add_stream_from_template(template) if hasattr(out, "add_stream_from_template") else out.add_stream(template=template)
         for packet in src.demux(video=0):
             if packet.size:
                 packet.stream = stream
