@@ -29,16 +29,19 @@ from pathlib import Path
 
 from sal_adapters import open_dataset, write_sequence
 
+#: A dataset kind's reader: open, then decode every frame in order.
+KIND_READER = """
+seq = open_dataset("{kind}", PATH{options})
+opened = time.perf_counter()
+for frame in seq:
+    frame.image
+"""
+
 READERS = {
     "imports only": """
 opened = time.perf_counter()
 """,
-    "rosbag kind": """
-seq = open_dataset("rosbag", PATH)
-opened = time.perf_counter()
-for frame in seq:
-    frame.image
-""",
+    "rosbag kind": KIND_READER.format(kind="rosbag", options=""),
     "rosbags loop": """
 from rosbags.highlevel import AnyReader
 from rosbags.image import message_to_cvimage
@@ -47,12 +50,7 @@ with AnyReader([Path(PATH)]) as reader:
     for connection, _, raw in reader.messages([c for c in reader.connections if c.topic == "/cam0/image_raw"]):
         message_to_cvimage(reader.deserialize(raw, connection.msgtype), "rgb8")
 """,
-    "video kind": """
-seq = open_dataset("video", PATH)
-opened = time.perf_counter()
-for frame in seq:
-    frame.image
-""",
+    "video kind": KIND_READER.format(kind="video", options=""),
     "PyAV loop": """
 import av
 with av.open(PATH) as container:
@@ -60,12 +58,7 @@ with av.open(PATH) as container:
     for frame in container.decode(video=0):
         frame.to_ndarray(format="rgb24")
 """,
-    "folder": """
-seq = open_dataset("kitti", PATH, sequence="07")
-opened = time.perf_counter()
-for frame in seq:
-    frame.image
-""",
+    "folder": KIND_READER.format(kind="kitti", options=', sequence="07"'),
 }
 
 CHILD = """

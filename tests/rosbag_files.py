@@ -13,6 +13,7 @@ from typing import Any
 import cv2
 import numpy as np
 from rosbags.rosbag2 import StoragePlugin, Writer
+from scipy.spatial.transform import Rotation
 
 from sal_adapters.camera import Camera
 from sal_adapters.rosbag.messages import camera_info_message, header, tf_message, typestore
@@ -85,6 +86,15 @@ def pose_at(seconds: float) -> np.ndarray:
     pose[:3, :3] = [[c, -s, 0], [s, c, 0], [0, 0, 1]]
     pose[:3, 3] = [seconds, 0.5 * seconds, 0.0]
     return pose
+
+
+def pose_message(pose: np.ndarray) -> Any:
+    """A ``geometry_msgs/Pose`` of a 4x4 pose."""
+    x, y, z, w = Rotation.from_matrix(pose[:3, :3]).as_quat()
+    return TYPES["geometry_msgs/msg/Pose"](
+        position=TYPES["geometry_msgs/msg/Point"](x=pose[0, 3], y=pose[1, 3], z=pose[2, 3]),
+        orientation=TYPES["geometry_msgs/msg/Quaternion"](x=x, y=y, z=z, w=w),
+    )
 
 
 def camera_bag(

@@ -12,9 +12,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from rosbag_files import CAMERA, TYPES, camera_bag, frame_pixels, image, info, jpeg, make_bags, pose_at, tf, write_ros2_bag
+from rosbag_files import CAMERA, TYPES, camera_bag, frame_pixels, image, info, jpeg, make_bags, pose_at, pose_message, tf, write_ros2_bag
 from rosbags.highlevel import AnyReader
-from scipy.spatial.transform import Rotation
 
 from sal_adapters import DatasetError, DatasetWarning, Sequence, open_dataset, write_sequence
 from sal_adapters.rosbag.messages import header
@@ -219,12 +218,7 @@ def test_groundtruth_from_odometry_moved_to_the_camera_by_static_tf(tmp_path: Pa
     mount[:3, 3] = [0.0, 0.1, 0.0]
 
     def odometry(ns: int) -> object:
-        pose = pose_at(ns * 1e-9)
-        x, y, z, w = Rotation.from_matrix(pose[:3, :3]).as_quat()
-        geometry = TYPES["geometry_msgs/msg/Pose"](
-            position=TYPES["geometry_msgs/msg/Point"](x=pose[0, 3], y=pose[1, 3], z=pose[2, 3]),
-            orientation=TYPES["geometry_msgs/msg/Quaternion"](x=x, y=y, z=z, w=w),
-        )
+        geometry = pose_message(pose_at(ns * 1e-9))
         zero = TYPES["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)
         return TYPES["nav_msgs/msg/Odometry"](
             header=header(TYPES, ns, "map", False),
@@ -402,12 +396,7 @@ def test_a_command_system_replays_the_perturbed_bag(kitti_bags: list[Path], tmp_
 
 def test_groundtruth_from_pose_stamped(tmp_path: Path) -> None:
     def stamped(ns: int) -> object:
-        pose = pose_at(ns * 1e-9)
-        x, y, z, w = Rotation.from_matrix(pose[:3, :3]).as_quat()
-        geometry = TYPES["geometry_msgs/msg/Pose"](
-            position=TYPES["geometry_msgs/msg/Point"](x=pose[0, 3], y=pose[1, 3], z=pose[2, 3]),
-            orientation=TYPES["geometry_msgs/msg/Quaternion"](x=x, y=y, z=z, w=w),
-        )
+        geometry = pose_message(pose_at(ns * 1e-9))
         return TYPES["geometry_msgs/msg/PoseStamped"](header=header(TYPES, ns, "world", False), pose=geometry)
 
     extra = [("/mocap/pose", "geometry_msgs/msg/PoseStamped", ns, stamped(ns)) for ns in range(1_000_000_000, 2_000_000_000, 10_000_000)]
@@ -430,3 +419,14 @@ def test_sal_perturb_writes_each_perturbed_bag_in_the_source_format(kitti_bags: 
     (bag,) = (tmp_path / "out" / "bag_night" / "images" / "dusk").glob("*.mcap")
     found = counts(bag)
     assert found["/cam0/image_raw"] == found["/tf"] == found["/cam0/camera_info"] == 6  # other topics over the excerpt's span
+
+
+def test_a_rectified_stereo_pair_is_placed_by_the_right_camera_info(tmp_path: Path) -> None:
+    world = open_dataset("synthetic", scene="urban", frames=3, sensor="stereo", cache_dir=tmp_path / "render")
+    bag = write_sequence(world, tmp_path / "urban.mcap")  # the right CameraInfo's P carries Tx = -fx * 0.54 m
+    seq = open_dataset("rosbag", bag, **STEREO)
+    assert seq.camera.right is None and seq.camera.baseline_m == pytest.approx(world.camera.baseline_m, rel=1e-12)
+    np.testing.assert_allclose(seq.camera.T_lr, world.camera.T_lr, atol=1e-12)
+    assert_same_frames(seq, world, right=True)
+    wider = open_dataset("rosbag", bag, baseline_m=0.6, **STEREO)  # a given baseline wins
+    assert wider.camera.baseline_m == 0.6

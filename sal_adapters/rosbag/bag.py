@@ -20,7 +20,7 @@ from typing import Any
 from sal_adapters.common.errors import DatasetError
 from sal_adapters.common.suggest import suggestion
 
-__all__ = ["Bag", "MessageRef", "bag_format", "bag_version", "header_stamp_ns", "open_bag"]
+__all__ = ["Bag", "MessageRef", "bag_files", "bag_format", "bag_version", "header_stamp_ns", "open_bag"]
 
 #: Message types whose serialised form starts with a ``std_msgs/Header``.
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
@@ -53,10 +53,14 @@ def bag_format(path: Path) -> str:
     raise DatasetError("not a ROS bag: expected a .bag file, a .mcap file or a ROS 2 bag folder", path)
 
 
+def bag_files(path: Path) -> list[Path]:
+    """The bag's files: ``path`` itself, or the files of a ROS 2 bag folder (sorted)."""
+    return [path] if path.is_file() else sorted(p for p in path.iterdir() if p.is_file())
+
+
 def bag_version(path: Path) -> int:
     """The newest modification time (ns) of the bag's files: a rewritten bag is opened afresh."""
-    files = [path] if path.is_file() else [p for p in path.iterdir() if p.is_file()]
-    return max((p.stat().st_mtime_ns for p in files), default=0)
+    return max((p.stat().st_mtime_ns for p in bag_files(path)), default=0)
 
 
 def header_stamp_ns(raw: bytes | memoryview, ros1: bool) -> int:

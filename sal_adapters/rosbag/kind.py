@@ -16,21 +16,19 @@ import re
 import warnings
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-from sal_adapters.camera import Camera
 from sal_adapters.common.errors import DatasetError, DatasetWarning
 from sal_adapters.datasets import DatasetKind
-from sal_adapters.rosbag.bag import IMAGE_TYPES, Bag, MessageRef, bag_version, header_stamp_ns, open_bag
+from sal_adapters.rosbag.bag import IMAGE_TYPES, Bag, MessageRef, bag_files, bag_version, header_stamp_ns, open_bag
+from sal_adapters.rosbag.calibration import camera_from, first_info, sibling_info, stereo_camera
 from sal_adapters.rosbag.pixels import BagImage, check_encoding
-from sal_adapters.rosbag.transforms import TransformTree, read_groundtruth
+from sal_adapters.rosbag.transforms import read_groundtruth
 from sal_adapters.sequence import Frame, FrameRecord, Sequence
 
 __all__ = ["ROSBAG", "RosbagDataset"]
 
-CAMERA_INFO = ("sensor_msgs/msg/CameraInfo",)
 STAMPS = ("header", "log")
 FORMAT_NAMES = {"ros1": "ROS 1 bag", "sqlite3": "ROS 2 bag (sqlite3)", "mcap": "ROS 2 bag (MCAP)", "mcap_file": "MCAP file"}
 
@@ -108,13 +106,16 @@ class RosbagDataset(DatasetKind):
         first = bag.read(left.refs[0])
         grey = check_encoding(first, image_topic, path)
         camera_frame = first.header.frame_id.lstrip("/")
-        camera_info_topic = camera_info_topic or _sibling_info(bag, image_topic, intrinsics)
-        camera = _camera(bag, camera_info_topic, intrinsics, distortion, first, image_topic)
+        camera_info_topic = camera_info_topic or sibling_info(bag, image_topic, intrinsics)
+        camera = camera_from(bag, camera_info_topic, first_info(bag, camera_info_topic), intrinsics, distortion, first, image_topic)
 
         partner, sensor = None, "mono"
         if right_image_topic is not None:
             partner, sensor = _indexed(bag, right_image_topic, "right_image_topic", stamps), "stereo"
-            camera = _stereo_camera(bag, camera, partner, right_camera_info_topic, intrinsics, distortion, camera_frame, baseline_m)
+            right_first = bag.read(partner.refs[0])
+            camera = stereo_camera(
+                bag, camera, right_first, right_image_topic, right_camera_info_topic, intrinsics, distortion, camera_frame, baseline_m
+            )
         elif depth_topic is not None:
             partner, sensor = _indexed(bag, depth_topic, "depth_topic", stamps), "rgbd"
             check_encoding(bag.read(partner.refs[0]), depth_topic, path, depth=True)
@@ -239,100 +240,6 @@ def _only_image_topic(bag: Bag, others: set[str | None]) -> str:
     raise DatasetError(f"the bag has several image topics ({', '.join(found)}); pass image_topic=", bag.path)
 
 
-def _sibling_info(bag: Bag, image_topic: str, intrinsics: list[float] | None) -> str | None:
-    """``<namespace>/camera_info`` of an image topic when the bag has it (``None`` with ``intrinsics``)."""
-    if intrinsics is not None:
-        return None
-    parts = image_topic.rstrip("/").split("/")
-    for cut in range(len(parts) - 1, 0, -1):  # /cam0/image_raw/compressed -> /cam0/camera_info
-        candidate = "/".join(parts[:cut] + ["camera_info"])
-        if candidate in bag.topics():
-            return candidate
-    infos = list(bag.topics(CAMERA_INFO))
-    raise DatasetError(
-        f"image_topic={image_topic!r} has no camera_info topic beside it; pass camera_info_topic= (the bag's: "
-        f"{', '.join(infos) or 'none'}) or intrinsics=[fx, fy, cx, cy]",
-        bag.path,
-    )
-
-
-def _camera(
-    bag: Bag, info_topic: str | None, intrinsics: list[float] | None, distortion: list[float] | None, image: Any, image_topic: str
-) -> Camera:
-    """The camera from ``intrinsics`` or the first ``CameraInfo`` of ``info_topic``; its size is
-    the images'."""
-    from sal_adapters.rosbag.pixels import decode_image
-
-    height, width = (image.height, image.width) if hasattr(image, "height") else decode_image(image, image_topic, bag.path).shape[:2]
-    try:
-        if intrinsics is not None:
-            fx, fy, cx, cy = (float(v) for v in intrinsics)
-            return Camera(fx, fy, cx, cy, int(width), int(height), tuple(float(v) for v in distortion or ()))
-        assert info_topic is not None
-        bag.require(info_topic, "camera_info_topic", CAMERA_INFO)
-        info = next((bag.deserialize(raw, info_topic) for _, raw in bag.raw_messages(info_topic)), None)
-        if info is None:
-            raise DatasetError(f"camera_info_topic={info_topic!r} holds no messages", bag.path)
-        K = np.asarray(info.K if hasattr(info, "K") else info.k, np.float64).reshape(3, 3)
-        D = tuple(float(v) for v in (info.D if hasattr(info, "D") else info.d))
-        if info.distortion_model not in ("plumb_bob", "rational_polynomial", "") and any(D):
-            raise DatasetError(
-                f"topic {info_topic}: distortion model {info.distortion_model!r} is not supported (plumb_bob, rational_polynomial)",
-                bag.path,
-            )
-        if (info.width, info.height) not in ((0, 0), (width, height)):
-            raise DatasetError(
-                f"topic {info_topic}: CameraInfo is {info.width}x{info.height} px but {image_topic}'s images are {width}x{height} px",
-                bag.path,
-            )
-        D = D[: max((i + 1 for i, v in enumerate(D) if v), default=0)]  # plumb_bob's 5 with k3 = 0 is OpenCV's 4
-        return Camera(float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2]), int(width), int(height), tuple(distortion or D))
-    except (ValueError, TypeError) as exc:
-        raise DatasetError(f"camera of {image_topic}: {exc}", bag.path) from None
-
-
-def _stereo_camera(
-    bag: Bag,
-    camera: Camera,
-    right: _Topic,
-    info_topic: str | None,
-    intrinsics: list[float] | None,
-    distortion: list[float] | None,
-    left_frame: str,
-    baseline_m: float | None,
-) -> Camera:
-    """``camera`` with the right camera of ``right`` (its own intrinsics when they differ)."""
-    first = bag.read(right.refs[0])
-    check_encoding(first, right.topic, bag.path)
-    info_topic = info_topic or _sibling_info(bag, right.topic, intrinsics)
-    right_camera = _camera(bag, info_topic, intrinsics, distortion, first, right.topic)
-    T_lr = _right_pose(bag, info_topic, right_camera, left_frame, first.header.frame_id.lstrip("/"), baseline_m)
-    same = right_camera.summary() == camera.summary() and right_camera.distortion == camera.distortion
-    return camera.with_stereo(T_lr, right=None if same else right_camera)
-
-
-def _right_pose(bag: Bag, info_topic: str | None, right: Camera, left_frame: str, right_frame: str, baseline_m: float | None) -> np.ndarray:
-    """``T_left_right`` (4x4) from the right CameraInfo's ``P`` (Tx = -fx * baseline), else
-    ``/tf_static``, else ``baseline_m``."""
-    T = np.eye(4)
-    if baseline_m is not None:
-        T[0, 3] = float(baseline_m)
-        return T
-    if info_topic is not None:
-        info = next(bag.deserialize(raw, info_topic) for _, raw in bag.raw_messages(info_topic))
-        P = np.asarray(info.P if hasattr(info, "P") else info.p, np.float64).reshape(3, 4)
-        if P[0, 3] != 0:
-            T[0, 3] = -P[0, 3] / P[0, 0]
-            return T
-    tree = TransformTree(bag, ("/tf_static",))
-    if left_frame in tree.frames and right_frame in tree.frames and left_frame != right_frame:
-        return tree.static_pose(left_frame, right_frame)
-    raise DatasetError(
-        f"the right camera's pose is unknown: its CameraInfo P has no Tx and /tf_static has no {left_frame!r} -> {right_frame!r}; pass baseline_m=",
-        bag.path,
-    )
-
-
 def _paired(left: _Topic, partner: _Topic | None, tolerance_s: float, path: Path, topic: str) -> list[tuple[int, int]]:
     """``(left message, partner message)`` pairs: the partner of the nearest stamp within the
     tolerance; left images without one are left out (one warning)."""
@@ -384,8 +291,7 @@ def _rate(stamps: np.ndarray) -> float:
 
 def _content_key(path: Path) -> str:
     """The bag's identity for caches: its files' names, sizes and modification times."""
-    files = [path] if path.is_file() else sorted(p for p in path.iterdir() if p.is_file())
-    return "rosbag:" + ";".join(f"{p.name}:{p.stat().st_size}:{p.stat().st_mtime_ns}" for p in files)
+    return "rosbag:" + ";".join(f"{p.name}:{p.stat().st_size}:{p.stat().st_mtime_ns}" for p in bag_files(path))
 
 
 ROSBAG = RosbagDataset()

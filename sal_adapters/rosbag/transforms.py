@@ -124,7 +124,8 @@ class TransformTree:
     def trajectory(self, parent: str, child: str) -> Trajectory:
         """Poses of ``child`` in ``parent`` along the chain (see the module text)."""
         edges = self.chain(parent, child)
-        moving = [edge.sampled() for edge in edges if not edge.static]
+        samples = [None if edge.static else edge.sampled() for edge in edges]
+        moving = [sample for sample in samples if sample is not None]
         if not moving:
             raise DatasetError(
                 f"groundtruth_frames {parent!r} -> {child!r}: every transform on the chain is static; no motion to take as ground truth",
@@ -135,8 +136,8 @@ class TransformTree:
         dense = max(moving, key=lambda item: len(item[0]))[0]
         times = dense[(dense >= start) & (dense <= stop)]
         poses = np.tile(np.eye(4), (len(times), 1, 1))
-        for edge in edges:
-            poses = poses @ (edge.poses[-1] if edge.static else _interpolated(*edge.sampled(), times))
+        for edge, sample in zip(edges, samples):
+            poses = poses @ (edge.poses[-1] if sample is None else _interpolated(*sample, times))
         return Trajectory.from_matrices(times, poses)
 
 

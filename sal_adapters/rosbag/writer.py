@@ -103,6 +103,9 @@ def _copy_through(sequence: Sequence, clean: Sequence, target: Path, fmt: str, f
     source = Bag(sequence.source)  # a reader of its own: frames decode through the shared one meanwhile
     wanted = _Frames(frames, kept, {role for _, role in roles.values()})
     grey = bool(sequence.grayscale)
+    options = clean.meta.get("options", {})
+    image_topics = {options.get("image_topic"), options.get("right_image_topic"), options.get("depth_topic")}
+    store = source.typestore
     try:
         with _Writer(target, fmt) as writer:
             connections = _connections_like(writer, source, fmt)
@@ -114,7 +117,7 @@ def _copy_through(sequence: Sequence, clean: Sequence, target: Path, fmt: str, f
                 ref = MessageRef(connection.topic, log_ns, rank)
                 owner = roles.get(ref)
                 if owner is None:
-                    if span[0] <= log_ns <= span[1] and not _is_image_topic(connection.topic, clean):
+                    if span[0] <= log_ns <= span[1] and connection.topic not in image_topics:
                         writer.write(connections[connection.id], log_ns, raw)
                     continue
                 index, role = owner
@@ -127,7 +130,6 @@ def _copy_through(sequence: Sequence, clean: Sequence, target: Path, fmt: str, f
                 message = source.deserialize(raw, connection.topic)
                 pixels = frame.image if role == "image" else frame.require("right")
                 rebuilt = encode_like(message, pixels, grey, connection.topic)
-                store = source.typestore
                 data = (
                     store.serialize_ros1(rebuilt, connection.msgtype) if fmt == "ros1" else store.serialize_cdr(rebuilt, connection.msgtype)
                 )
@@ -136,11 +138,6 @@ def _copy_through(sequence: Sequence, clean: Sequence, target: Path, fmt: str, f
         source.close()
     if wanted.missing():
         raise DatasetError(f"{sequence.name}: frames {sorted(wanted.missing())[:5]} were not found in the source bag", sequence.source)
-
-
-def _is_image_topic(topic: str, clean: Sequence) -> bool:
-    options = clean.meta.get("options", {})
-    return topic in {options.get("image_topic"), options.get("right_image_topic"), options.get("depth_topic")}
 
 
 def _log_span(clean: Sequence, sequence: Sequence) -> tuple[float, float]:
